@@ -1,0 +1,1 @@
+"""Built-in parametric functions, one module each (installed as ``paramlod.functions``)."""

@@ -1,0 +1,64 @@
+"""The shared 64-bit key buffers every point producer writes into, and their resolve to a Frame.
+
+Two ulong buffers of width x height (kernels/keys.cl): the colour key (depth | sRGB RGBA8) and the
+aux key (depth | octahedral normal | object id). Renderers only ever atom_min into them.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .device import cl_device
+from .frame import Frame
+from .programs import build
+
+
+class KeyBuffer:
+    def __init__(self, width: int, height: int):
+        import pyopencl as cl
+
+        self.width, self.height = int(width), int(height)
+        n = self.width * self.height
+        ctx = cl_device().context
+        self.color = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
+        self.aux = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
+        self._out = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4)]
+        self._resolve = build(["keys.cl", "resolve.cl"]).resolve
+
+    @property
+    def pixel_count(self) -> int:
+        return self.width * self.height
+
+    def clear(self):
+        import pyopencl as cl
+
+        q = cl_device().queue
+        ones = np.uint64(0xFFFFFFFFFFFFFFFF)
+        cl.enqueue_fill_buffer(q, self.color, ones, 0, self.pixel_count * 8)
+        cl.enqueue_fill_buffer(q, self.aux, ones, 0, self.pixel_count * 8)
+
+    def read_keys(self) -> tuple[np.ndarray, np.ndarray]:
+        """The raw colour and aux keys, uint64 (h, w) each."""
+        import pyopencl as cl
+
+        q = cl_device().queue
+        c = np.empty((self.height, self.width), np.uint64)
+        a = np.empty_like(c)
+        cl.enqueue_copy(q, c, self.color)
+        cl.enqueue_copy(q, a, self.aux)
+        return c, a
+
+    def resolve(self) -> Frame:
+        import pyopencl as cl
+
+        q = cl_device().queue
+        n = self.pixel_count
+        self._resolve(q, ((n + 255) // 256 * 256,), None, self.color, self.aux, np.uint32(n), *self._out)
+        h, w = self.height, self.width
+        color = np.empty((h, w, 4), np.float32)
+        depth = np.empty((h, w), np.float32)
+        normal = np.empty((h, w, 4), np.float32)
+        ids = np.empty((h, w), np.uint32)
+        for host, dev in zip((color, depth, normal, ids), self._out):
+            cl.enqueue_copy(q, host, dev)
+        q.finish()
+        return Frame(color=color, depth=depth, normal=np.ascontiguousarray(normal[..., :3]), object_id=ids)

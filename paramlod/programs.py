@@ -1,0 +1,48 @@
+"""Building OpenCL programs from kernels/ plus generated function code, with a per-process cache
+and compiler errors that show the generated lines."""
+from __future__ import annotations
+
+import re
+
+from paramlod import kernels
+
+from .codegen import cl_dispatch_source
+from .device import cl_device
+from .errors import FunctionError
+
+_cache: dict[tuple, object] = {}
+
+
+def _context_lines(src: str, log: str, around: int = 3) -> str:
+    lines = src.splitlines()
+    shown = []
+    for m in re.finditer(r":(\d+):(\d+):", log):
+        ln = int(m.group(1))
+        lo, hi = max(1, ln - around), min(len(lines), ln + around)
+        shown.append("\n".join(f"{'>' if i == ln else ' '}{i:5d} | {lines[i - 1]}" for i in range(lo, hi + 1)))
+        if len(shown) >= 3:
+            break
+    return "\n...\n".join(shown)
+
+
+def build(files: list[str], functions=(), defines: dict | None = None):
+    """Compile common.cl + the functions' generated code + ``files`` (names in kernels/)."""
+    import pyopencl as cl
+
+    gen = cl_dispatch_source(list(functions)) if functions else ""
+    src = "\n".join([kernels.source("common.cl"), gen, *(kernels.source(f) for f in files)])
+    opts = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items()))
+    dev = cl_device()
+    key = (src, opts, id(dev.context))
+    prog = _cache.get(key)
+    if prog is None:
+        try:
+            prog = cl.Program(dev.context, src).build(options=list(opts))
+        except cl.RuntimeError as exc:
+            log = str(exc)
+            names = ", ".join(f"'{f.name}' ({f.source})" for f in functions) or "none"
+            raise FunctionError(
+                f"the generated OpenCL code does not compile (functions: {names}).\n"
+                f"{_context_lines(src, log)}\ncompiler said:\n{log[-2000:]}") from None
+        _cache[key] = prog
+    return prog

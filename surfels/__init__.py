@@ -1,0 +1,1 @@
+"""Blue surfels (progressive blue-noise sampling and the prefix renderer); see issue tracker."""
