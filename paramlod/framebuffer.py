@@ -9,7 +9,7 @@ import numpy as np
 
 from .device import cl_device
 from .frame import Frame
-from .programs import build
+from .programs import kernel
 
 
 class KeyBuffer:
@@ -22,7 +22,7 @@ class KeyBuffer:
         self.color = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self.aux = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self._out = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4)]
-        self._resolve = build(["keys.cl", "resolve.cl"]).resolve
+        self._resolve = kernel("resolve", ["keys.cl", "resolve.cl"])
 
     @property
     def pixel_count(self) -> int:

@@ -16,7 +16,7 @@ COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
 
 @dataclass
 class PointSettings:
-    density: float = 1.25   # samples per pixel of measured extent, along u and along v
+    density: float = 1.5    # samples per pixel of s_u, s_v: spacing <= 0.67 px < 1/sqrt(2), no holes at any angle
     widen: float = 0.005    # parameter range enlarged by this fraction per side (no seams)
     max_side: int = 1024    # samples per side at most; patches that hit it are counted in stats
 

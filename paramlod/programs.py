@@ -46,3 +46,18 @@ def build(files: list[str], functions=(), defines: dict | None = None):
                 f"{_context_lines(src, log)}\ncompiler said:\n{log[-2000:]}") from None
         _cache[key] = prog
     return prog
+
+
+_kernels: dict[tuple, object] = {}
+
+
+def kernel(name: str, files: list[str], functions=(), defines: dict | None = None):
+    """A kernel object from ``build(files, functions, defines)``, retrieved once and reused."""
+    import pyopencl as cl
+
+    prog = build(files, functions, defines)
+    key = (id(prog), name)
+    k = _kernels.get(key)
+    if k is None:
+        k = _kernels[key] = cl.Kernel(prog, name)
+    return k

@@ -1,0 +1,150 @@
+"""The OpenCL LOD stage against its numpy twin, and the stage's invariants."""
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import paramlod as pl
+from paramlod.lod_reference import lod_step, run_lod
+from paramlod.patches import FLAG_FORCED, EVAL_DTYPE, sort_key
+from paramlod.render import camera_record, renderer_for
+
+CAMERAS = [
+    ((0, 0, 6), (0, 0, 0)),
+    ((0.5, 2.0, 2.5), (0, 0, 0)),
+    ((3.0, -1.0, 1.2), (0.2, 0, 0)),
+    ((0.2, 0.1, 1.6), (0, 0, 0)),      # close: many patches, some forced or culled
+]
+
+
+def cl_render_list(scene, camera, lod=None):
+    lod = lod or pl.LodSettings()
+    r = renderer_for(scene)
+    dev = r.upload(scene, camera)
+    _, n, steps, _ = r.lod.run(dev["inst"], len(scene.objects), dev["domains"], dev["cam"], lod)
+    return r.lod.read_render_list(n), steps
+
+
+def canonical(rp):
+    rp = rp[sort_key(rp)]
+    return rp["inst"], rp["range"], rp["flags"]
+
+
+@pytest.mark.parametrize("fname", ["sphere", "torus"])
+@pytest.mark.parametrize("eye,target", CAMERAS)
+def test_cl_lod_matches_numpy_reference(fname, eye, target):
+    scene = pl.Scene()
+    scene.add(fname, transform=pl.rotate(30, (1, 0.3, 0)))
+    cam = pl.Camera.look_at(eye, target, size=(320, 240))
+    lod = pl.LodSettings(threshold=(40.0, 40.0))
+    got, steps = cl_render_list(scene, cam, lod)
+    ref, ref_steps = run_lod(scene, camera_record(cam), lod)
+    assert steps == ref_steps
+    gi, gr, gf = canonical(got)
+    ri, rr, rf = canonical(ref)
+    np.testing.assert_array_equal(gi, ri)
+    np.testing.assert_array_equal(gr, rr)   # exact: children ranges are exact float32 halvings
+    np.testing.assert_array_equal(gf, rf)
+    gext = got["ext"][sort_key(got)]
+    rext = ref["ext"][sort_key(ref)]
+    np.testing.assert_allclose(gext, rext, rtol=1e-3, atol=1e-3)
+
+
+def test_render_patches_respect_thresholds_unless_forced():
+    scene = pl.Scene()
+    scene.add("torus")
+    cam = pl.Camera.look_at((0, 1.5, 2.2), (0, 0, 0), size=(400, 300))
+    lod = pl.LodSettings(threshold=(30.0, 30.0), max_steps=12)
+    rp, steps = cl_render_list(scene, cam, lod)
+    assert len(rp) > 20
+    forced = (rp["flags"] & FLAG_FORCED) != 0
+    assert not forced.any()
+    assert np.all(rp["ext"][:, 0] <= 30.0) and np.all(rp["ext"][:, 1] <= 30.0)
+    # forcing: with only 2 steps the remaining patches come out at step 2, flagged
+    rp2, steps2 = cl_render_list(scene, cam, pl.LodSettings(threshold=(30.0, 30.0), max_steps=2))
+    f2 = (rp2["flags"] & FLAG_FORCED) != 0
+    assert f2.any() and np.all(rp2["flags"][f2] & 15 == 2)
+    over = (rp2["ext"][:, 0] > 30) | (rp2["ext"][:, 1] > 30)
+    assert np.all(f2[over])
+    assert steps2[-1]["forced"] == int(f2.sum())
+
+
+def test_object_outside_frustum_yields_no_patches():
+    scene = pl.Scene()
+    scene.add("sphere", transform=pl.translate(0, 0, 20))  # behind the camera
+    scene.add("torus", transform=pl.translate(50, 0, 0))   # far to the side
+    cam = pl.Camera.look_at((0, 0, 5), (0, 0, 0), size=(128, 128))
+    rp, steps = cl_render_list(scene, cam)
+    assert len(rp) == 0
+    assert steps[0]["culled"] == 2
+    frame = pl.render(scene, cam)
+    assert not frame.coverage.any()
+
+
+def _area(rng):
+    return (rng[..., 1] - rng[..., 0]).astype(np.float64) * (rng[..., 3] - rng[..., 2])
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    u0=st.floats(0, 3), du=st.floats(0.05, 3), v0=st.floats(0, 6), dv=st.floats(0.05, 6),
+    t=st.sampled_from([5.0, 20.0, 80.0]), dist=st.floats(1.6, 8.0),
+)
+def test_children_tile_their_parent_exactly(u0, du, v0, dv, t, dist):
+    """One subdivision step: the children of a patch cover it exactly, without overlap."""
+    scene = pl.Scene()
+    scene.add("sphere")
+    cam = pl.Camera.look_at((0.3, 0.4, dist), (0, 0, 0), size=(200, 200))
+    p = np.zeros(1, EVAL_DTYPE)
+    p["range"] = [u0, u0 + du, v0, v0 + dv]
+    children, rp, stats = lod_step(p, scene.instance_buffers(), scene.functions(),
+                                   camera_record(cam).astype(np.float32), t, t, 1, False)
+    if stats["culled"] or len(rp):
+        assert len(children) == 0
+        return
+    assert len(children) in (2, 3, 4)
+    r = children["range"]
+    assert np.isclose(_area(r).sum(), _area(p["range"]).sum(), rtol=1e-6)
+    assert np.all(r[:, 0] >= p["range"][0, 0]) and np.all(r[:, 1] <= p["range"][0, 1])
+    assert np.all(r[:, 2] >= p["range"][0, 2]) and np.all(r[:, 3] <= p["range"][0, 3])
+    # no two children overlap with positive area
+    for i in range(len(r)):
+        for j in range(i + 1, len(r)):
+            ou = min(r[i, 1], r[j, 1]) - max(r[i, 0], r[j, 0])
+            ov = min(r[i, 3], r[j, 3]) - max(r[i, 2], r[j, 2])
+            assert ou <= 0 or ov <= 0
+
+
+def test_render_list_tiles_the_visible_domain():
+    """No patch is lost: with nothing culled, render patches cover the whole domain exactly."""
+    scene = pl.Scene()
+    scene.add("sphere")
+    cam = pl.Camera.look_at((0, 0, 4.0), (0, 0, 0), size=(256, 256))
+    rp, steps = cl_render_list(scene, cam, pl.LodSettings(threshold=(24.0, 24.0)))
+    assert sum(s["culled"] for s in steps) == 0
+    total = _area(rp["range"]).sum()
+    assert np.isclose(total, np.pi * 2 * np.pi, rtol=1e-5)
+
+
+def test_buffers_grow_instead_of_dropping_patches():
+    scene = pl.Scene()
+    scene.add("sphere")
+    cam = pl.Camera.look_at((0, 0, 3.0), (0, 0, 0), size=(512, 512))
+    r = renderer_for(scene)
+    # shrink the buffers to force overflow, then check nothing was lost
+    from paramlod.lod import _Buffer
+    from paramlod.patches import RENDER_DTYPE
+    r.lod.bufs = [_Buffer(EVAL_DTYPE, 1), _Buffer(EVAL_DTYPE, 1)]
+    r.lod.render = _Buffer(RENDER_DTYPE, 1)
+    for b in (*r.lod.bufs, r.lod.render):
+        b.capacity = 2  # pretend tiny: the stage must grow and redo the step
+    rp, _ = cl_render_list(scene, cam, pl.LodSettings(threshold=(10.0, 10.0)))
+    assert len(rp) > 1000
+    assert np.isclose(_area(rp["range"]).sum(), 2 * np.pi ** 2, rtol=1e-5)
+
+
+def test_capacity_limit_is_named():
+    scene = pl.Scene()
+    scene.add("sphere")
+    cam = pl.Camera.look_at((0, 0, 3.0), (0, 0, 0), size=(512, 512))
+    with pytest.raises(pl.CapacityError, match="max_patches=100"):
+        cl_render_list(scene, cam, pl.LodSettings(threshold=(4.0, 4.0), max_patches=100))

@@ -1,0 +1,126 @@
+"""Direct point renderer: the 64-bit buffer against np.minimum.at, silhouettes, holes, NaN."""
+import numpy as np
+import pytest
+import sympy as sp
+
+import paramlod as pl
+from paramlod.device import cl_device
+from paramlod.framebuffer import KeyBuffer
+from paramlod.points import DirectPointRenderer, side_counts
+from paramlod.render import LIGHT, camera_record, renderer_for
+
+from conftest import iou, sphere_disc
+
+
+def test_key_buffer_equals_minimum_at_over_the_same_samples():
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    scene = pl.Scene()
+    scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
+    scene.add("torus", transform=pl.translate(0.8, 0.2, 0.3) @ pl.rotate(70, (1, 0, 0)))
+    cam = pl.Camera.look_at((0.5, 0.8, 3.5), (0.3, 0, 0), size=(96, 80))
+    r = renderer_for(scene)
+    dev = r.upload(scene, cam)
+    settings = pl.RenderSettings()
+    rbuf, n, _, _ = r.lod.run(dev["inst"], len(scene.objects), dev["domains"], dev["cam"], settings.lod)
+    rp = r.lod.read_render_list(n)
+    counts = side_counts(rp["ext"][:, 2], settings.points) * side_counts(rp["ext"][:, 3], settings.points)
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32)
+    total = int(counts.sum())
+    q = cl_device().queue
+    rec = DirectPointRenderer(scene.functions(), record=True)
+    off_d = cla.to_device(q, offsets)
+    pix_d = cla.empty(q, total, np.uint32)
+    key_d = cla.empty(q, total, np.uint64)
+    keys = KeyBuffer(*cam.size)
+    keys.clear()
+    stats = rec.draw(rbuf, n, dev["inst"], dev["materials"], dev["cam"], dev["light"], keys,
+                     settings.points, record_args=(off_d.data, pix_d.data, key_d.data))
+    color, _ = keys.read_keys()
+    pix, key = pix_d.get(), key_d.get()
+    assert stats["samples"] == total
+    kept = pix != 0xFFFFFFFF
+    assert kept.sum() > 1000
+    expect = np.full(cam.size[0] * cam.size[1], np.iinfo(np.uint64).max, np.uint64)
+    np.minimum.at(expect, pix[kept], key[kept])
+    np.testing.assert_array_equal(color.reshape(-1), expect)
+
+
+@pytest.mark.parametrize("dist", [2.2, 2.6, 9.0])
+def test_sphere_silhouette_and_no_holes(dist):
+    scene = pl.Scene()
+    scene.add("sphere")
+    cam = pl.Camera.look_at((0.3 * dist, 0.2 * dist, dist), (0, 0, 0), size=(256, 256))
+    frame = pl.render(scene, cam)
+    disc, depth = sphere_disc(cam)
+    # points cover every pixel a sample lands in (conservative), so the silhouette may grow by
+    # up to a pixel: IoU >= 0.99 once the disc is large (radius >= 100 px), and always within 1 px
+    if dist <= 2.6:
+        assert iou(frame.coverage, disc) >= 0.99
+    assert not np.any(frame.coverage & ~_dilate(disc, 1))
+    assert np.all(frame.coverage[disc & ~_dilate(~disc, 1)])
+    # no holes: every pixel well inside the disc shows the front surface at the analytic depth
+    inner = disc & ~_dilate(~disc, 2)
+    assert inner.sum() > 500
+    assert np.all(frame.coverage[inner])
+    err = np.abs(frame.depth[inner] - depth[inner])
+    assert np.max(err) < 0.02 * dist, f"max depth error {np.max(err)} (a hole shows the back side)"
+    assert frame.stats["nan_samples"] == 0
+
+
+def _dilate(mask, r):
+    out = mask.copy()
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            out |= np.roll(np.roll(mask, dy, 0), dx, 1)
+    return out
+
+
+def test_rendering_twice_is_bit_identical():
+    scene = pl.Scene()
+    scene.add("torus", transform=pl.rotate(50, (1, 0, 0)))
+    scene.add("sphere", transform=pl.translate(0, 0, 0.3) @ pl.scale(0.5))
+    cam = pl.Camera.look_at((0, 1, 3), (0, 0, 0), size=(160, 120))
+    a, b = pl.render(scene, cam), pl.render(scene, cam)
+    for name in ("color", "depth", "normal", "object_id"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_frame_channels_are_consistent():
+    scene = pl.Scene()
+    scene.add("sphere", material=pl.Material(color=(1.0, 0.0, 0.0)))
+    scene.add("sphere", transform=pl.translate(2.2, 0, 0), material=pl.Material(color=(0.0, 0.0, 1.0)))
+    cam = pl.Camera.look_at((1.1, 0, 6), (1.1, 0, 0), size=(160, 96))
+    f = pl.render(scene, cam)
+    cov = f.coverage
+    assert set(np.unique(f.object_id[cov])) == {1, 2}
+    assert np.all(f.object_id[~cov] == 0) and np.all(f.color[~cov] == 0)
+    assert np.all(f.color[cov, 3] == 1.0)
+    left, right = f.object_id == 1, f.object_id == 2
+    assert f.color[left, 0].mean() > f.color[left, 2].mean()
+    assert f.color[right, 2].mean() > f.color[right, 0].mean()
+    # normals: unit length, facing the camera, close to the analytic sphere normals
+    n = f.normal[cov]
+    assert np.allclose(np.linalg.norm(n, axis=-1), 1, atol=1e-2)
+    ys, xs = np.nonzero(left)
+    y, x = ys[len(ys) // 2], xs[len(xs) // 2]
+    assert f.normal[y, x, 2] > 0.5
+
+
+def test_nan_samples_are_dropped_and_counted():
+    @pl.parametric(u=(0, 1), v=(0, 1))
+    def half_nan(u, v):
+        # undefined (sqrt of a negative number) where u < 0.5
+        return u - 0.5, v - 0.5, sp.sqrt(u - sp.Rational(1, 2)) * 0.1
+
+    scene = pl.Scene()
+    scene.add(half_nan)
+    cam = pl.Camera.look_at((0, 0, 2), (0, 0, 0), size=(96, 96))
+    f = pl.render(scene, cam)
+    assert f.stats["nan_samples"] > 0
+    cov = f.coverage
+    xs = np.nonzero(cov)[1]
+    assert cov.sum() > 500
+    # only the defined half (x >= 0, right half of the image) is drawn
+    assert xs.min() >= 96 // 2 - 2
