@@ -41,19 +41,26 @@ class Renderer:
         self.lod = LodStage(self.functions)
         self.points = DirectPointRenderer(self.functions, record=record)
         self.keys: KeyBuffer | None = None
+        self._scene_key, self._scene_dev = None, None
 
     def upload(self, scene: Scene, camera: Camera):
+        """Device copies of the scene's buffers (re-sent only when the scene or its time changed)
+        and of this frame's camera."""
         import pyopencl.array as cla
 
         q = cl_device().queue
-        inst_f, inst_u, params = scene.instance_buffers()
-        dev = {
-            "inst": tuple(cla.to_device(q, a).data for a in (inst_f, inst_u, params)),
-            "materials": cla.to_device(q, scene.materials()).data,
-            "cam": cla.to_device(q, camera_record(camera)).data,
-            "light": cla.to_device(q, LIGHT).data,
-            "domains": inst_f[:, 28:32],
-        }
+        key = (id(scene), scene._version, scene.time)
+        if key != self._scene_key:
+            inst_f, inst_u, params = scene.instance_buffers()
+            self._scene_dev = {
+                "inst": tuple(cla.to_device(q, a).data for a in (inst_f, inst_u, params)),
+                "materials": cla.to_device(q, scene.materials()).data,
+                "light": cla.to_device(q, LIGHT).data,
+                "domains": inst_f[:, 28:32],
+                "count": len(inst_f),
+            }
+            self._scene_key = key
+        dev = dict(self._scene_dev, cam=cla.to_device(q, camera_record(camera)).data)
         if self.keys is None or (self.keys.width, self.keys.height) != camera.size:
             self.keys = KeyBuffer(*camera.size)
         return dev
@@ -62,7 +69,7 @@ class Renderer:
         t0 = time.perf_counter()
         dev = self.upload(scene, camera)
         t1 = time.perf_counter()
-        rbuf, n_render, steps, lod_ms = self.lod.run(dev["inst"], len(scene.objects), dev["domains"],
+        rbuf, n_render, steps, lod_ms = self.lod.run(dev["inst"], dev["count"], dev["domains"],
                                                      dev["cam"], settings.lod)
         t2 = time.perf_counter()
         self.keys.clear()
@@ -102,10 +109,16 @@ def renderer_for(scene: Scene) -> Renderer:
     return r
 
 
-def render(scene: Scene, camera: Camera, variant: str = "points", settings: RenderSettings | None = None):
-    """Render ``scene`` seen by ``camera``; returns a Frame (colour, depth, normal, ids, stats)."""
+def render(scene: Scene, camera: Camera, variant: str = "points", settings: RenderSettings | None = None,
+           time: float | None = None):
+    """Render ``scene`` seen by ``camera``; returns a Frame (colour, depth, normal, ids, stats).
+
+    ``time`` sets ``scene.time``, the value of the implicit parameter ``t`` of animated functions.
+    """
     if variant not in VARIANTS:
         raise SceneError(f"unknown variant '{variant}' (available: {', '.join(VARIANTS)})")
     if not scene.objects:
         raise SceneError("the scene has no objects; add one with scene.add(...)")
+    if time is not None:
+        scene.time = float(time)
     return renderer_for(scene).render(scene, camera, settings or RenderSettings())

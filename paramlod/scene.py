@@ -1,22 +1,29 @@
-"""Scenes: objects (a function, its parameters, a transform and a material), and the flat instance
-buffers the kernels read."""
+"""Scenes: objects (a function, its parameters, a transform and a material), instance arrays,
+composite parts, and the flat instance buffers the kernels read.
+
+An object may stand for many instances (``add_instances``): per-instance parameters and
+transforms are numpy arrays, so a 358,140-fiber curtain is built without a Python loop per
+instance. Parts declared by a function (``parts=[Part(...)]``) become child instances placed on
+the parent's surface frame, recomputed for the scene's ``time``.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import FunctionError, SceneError
 from .function import ParametricFunction
 from .registry import get_function
 from .transforms import matrix as _as_matrix
 
 # Per-instance float record (see kernels/common.cl, INST_* offsets): 4x4 model matrix (row-major),
-# 3x4 normal matrix rows, domain (u0, u1, v0, v1), material (r, g, b, specular).
+# 3x4 normal matrix rows, domain (u0, u1, v0, v1).
 INST_FLOATS = 32
 # Per-instance uint record: function index, parameter-block offset, object id, flags.
 INST_UINTS = 4
-MAX_OBJECTS = 4095  # object ids are carried in 12 bits of the attribute key (docs/frame.md)
+MAX_OBJECTS = 4095   # object ids are carried in 12 bits of the aux key (docs/frame.md)
+MAX_PART_DEPTH = 4
 
 
 @dataclass
@@ -36,56 +43,177 @@ class Material:
 @dataclass
 class SceneObject:
     function: ParametricFunction
-    params: dict
-    transform: np.ndarray
+    params: dict                       # shared values (defaults for the rest)
+    transform: np.ndarray              # 4x4, applied after the per-instance transforms
     material: Material
     object_id: int
-    block: np.ndarray = field(repr=False, default=None)
+    count: int = 1
+    per_instance: dict = field(default_factory=dict)   # name -> array [count] or [count, size]
+    transforms: np.ndarray | None = None               # [count, 4, 4] or None
+
+
+def _param_columns(fn: ParametricFunction) -> dict[str, slice]:
+    cols, at = {}, 0
+    for p in fn.params:
+        cols[p.name] = slice(at, at + p.size)
+        at += p.size
+    return cols
+
+
+def _blocks(fn: ParametricFunction, shared: dict, per_instance: dict, count: int, time: float) -> np.ndarray:
+    """Parameter blocks [count, param_count] (float32)."""
+    shared = dict(shared)
+    if "t" in {p.name for p in fn.params} and "t" not in shared and "t" not in per_instance:
+        shared["t"] = time
+    base = fn.param_block(shared)
+    blocks = np.broadcast_to(base, (count, base.size)).copy()
+    cols = _param_columns(fn)
+    for name, arr in per_instance.items():
+        blocks[:, cols[name]] = arr.reshape(count, -1)
+    return blocks
 
 
 class Scene:
-    def __init__(self, background=(0.12, 0.12, 0.14)):
+    def __init__(self, background=(0.12, 0.12, 0.14), time: float = 0.0):
         self.objects: list[SceneObject] = []
         self.background = tuple(float(x) for x in background)
+        self.time = float(time)
+        self._version = 0
+        self._cache = None
 
     def add(self, fn_or_name, params: dict | None = None, transform=None, material: Material | None = None) -> SceneObject:
+        """Add one object; ``params`` override the function's defaults."""
+        return self.add_instances(fn_or_name, 1, params=params, transform=transform, material=material)
+
+    def add_instances(self, fn_or_name, count: int, params: dict | None = None, per_instance: dict | None = None,
+                      transforms=None, transform=None, material: Material | None = None) -> SceneObject:
+        """Add ``count`` instances of one function as one object (one object id, one material).
+
+        ``per_instance`` maps parameter names to arrays with ``count`` rows; ``transforms`` is an
+        optional [count, 4, 4] array applied before ``transform``.
+        """
         fn = get_function(fn_or_name)
         if len(self.objects) >= MAX_OBJECTS:
-            raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits)")
-        block = fn.param_block(params)  # validates names, shapes and finiteness
+            raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits); "
+                             "use add_instances for many copies of one function")
+        count = int(count)
+        if count < 1:
+            raise SceneError(f"'{fn.name}': instance count must be at least 1, got {count}")
+        params = dict(params or {})
+        for name, val in params.items():
+            try:
+                np.asarray(val, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise FunctionError(f"function '{fn.name}': parameter '{name}' must be a number or a list "
+                                    f"of numbers, got {val!r}") from None
+        fn.param_block(params)  # validates names, shapes and finiteness of the shared values
+        per = {}
+        known = {p.name: p for p in fn.params}
+        for name, arr in (per_instance or {}).items():
+            if name not in known:
+                raise SceneError(f"'{fn.name}' has no parameter '{name}' (its parameters: {', '.join(known) or 'none'})")
+            a = np.asarray(arr, dtype=np.float32)
+            want = (count,) if not known[name].is_array else (count, known[name].size)
+            if a.shape != want:
+                raise SceneError(f"'{fn.name}': per-instance '{name}' must have shape {want}, got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise SceneError(f"'{fn.name}': per-instance '{name}' has non-finite values")
+            per[name] = a
+        if transforms is not None:
+            transforms = np.asarray(transforms, dtype=np.float64)
+            if transforms.shape != (count, 4, 4) or not np.all(np.isfinite(transforms)):
+                raise SceneError(f"'{fn.name}': transforms must be a finite [{count}, 4, 4] array, got {transforms.shape}")
         m = np.eye(4) if transform is None else _as_matrix(transform)
-        obj = SceneObject(fn, dict(params or {}), m, material or Material(), len(self.objects) + 1, block)
+        obj = SceneObject(fn, params, m, material or Material(), len(self.objects) + 1, count, per, transforms)
         self.objects.append(obj)
+        self._version += 1
         return obj
 
+    @property
+    def instance_count(self) -> int:
+        return len(self._expanded()[0])
+
     def functions(self) -> list[ParametricFunction]:
-        """Distinct functions in first-use order; their index is the kernel's function id."""
+        """Distinct functions, parts included, in first-use order; the index is the kernel's id."""
         out: list[ParametricFunction] = []
+
+        def visit(fn, depth):
+            if all(fn is not f for f in out):
+                out.append(fn)
+            if depth < MAX_PART_DEPTH:
+                for part in getattr(fn, "parts", ()):
+                    visit(get_function(part.function), depth + 1)
+
         for o in self.objects:
-            if all(o.function is not f for f in out):
-                out.append(o.function)
+            visit(o.function, 0)
         return out
+
+    # --- flattening ------------------------------------------------------------------------
+    def _expanded(self):
+        """Groups (function, model matrices [n,4,4], blocks [n,k], object id, material)."""
+        groups = []
+
+        def place(fn, models, blocks, oid, mat, depth):
+            groups.append((fn, models, blocks, oid, mat))
+            if depth >= MAX_PART_DEPTH:
+                return
+            for part in getattr(fn, "parts", ()):
+                child = get_function(part.function)
+                u, v = part.at
+                frames = np.stack([fn.surface_frame(u, v, b) for b in blocks])
+                local = np.asarray(part.transform if part.transform is not None else np.eye(4), np.float64)
+                cmodels = models @ frames @ local
+                cblocks = _blocks(child, dict(part.params or {}), {}, len(blocks), self.time)
+                cmat = Material(part.color, mat.specular) if getattr(part, "color", None) is not None else mat
+                place(child, cmodels, cblocks, oid, cmat, depth + 1)
+
+        for o in self.objects:
+            models = np.broadcast_to(o.transform, (o.count, 4, 4))
+            if o.transforms is not None:
+                models = o.transform @ o.transforms
+            place(o.function, np.asarray(models, np.float64),
+                  _blocks(o.function, o.params, o.per_instance, o.count, self.time),
+                  o.object_id, o.material, 0)
+        return groups
 
     def instance_buffers(self):
         """(inst_f float32 [n, 32], inst_u uint32 [n, 4], params float32 [...]) for the kernels."""
+        key = (self._version, self.time)
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
         funcs = self.functions()
-        n = len(self.objects)
-        inst_f = np.zeros((n, INST_FLOATS), np.float32)
-        inst_u = np.zeros((n, INST_UINTS), np.uint32)
-        blocks, offset = [], 0
-        for i, o in enumerate(self.objects):
-            m = o.transform
-            nrm = np.linalg.inv(m[:3, :3]).T
-            inst_f[i, 0:16] = m.reshape(-1)
-            inst_f[i, 16:28] = np.hstack([nrm, np.zeros((3, 1))]).reshape(-1)
-            inst_f[i, 28:32] = [*o.function.u_range, *o.function.v_range]
-            fidx = next(k for k, f in enumerate(funcs) if f is o.function)
-            inst_u[i] = (fidx, offset, o.object_id, 0)
-            blocks.append(o.block)
-            offset += o.block.size
-        params = np.concatenate(blocks + [np.zeros(1, np.float32)]).astype(np.float32)
-        return inst_f, inst_u, params
+        groups = self._expanded()
+        inst_f, inst_u, params, mats = [], [], [], []
+        offset = 0
+        for fn, models, blocks, oid, mat in groups:
+            n = len(models)
+            f = np.zeros((n, INST_FLOATS), np.float32)
+            f[:, 0:16] = models.reshape(n, 16)
+            lin = models[:, :3, :3]
+            if np.any(np.abs(np.linalg.det(lin)) < 1e-20):
+                raise SceneError(f"'{fn.name}': an instance transform is singular")
+            nrm = np.transpose(np.linalg.inv(lin), (0, 2, 1))
+            f[:, 16:28] = np.concatenate([nrm, np.zeros((n, 3, 1))], axis=2).reshape(n, 12)
+            f[:, 28:32] = [*fn.u_range, *fn.v_range]
+            u = np.zeros((n, INST_UINTS), np.uint32)
+            u[:, 0] = next(k for k, g in enumerate(funcs) if g is fn)
+            k = blocks.shape[1]
+            u[:, 1] = offset + np.arange(n, dtype=np.int64) * k
+            u[:, 2] = oid
+            offset += n * k
+            inst_f.append(f)
+            inst_u.append(u)
+            params.append(blocks.reshape(-1))
+            mats.append(np.broadcast_to(np.array([*mat.color, mat.specular], np.float32), (n, 4)))
+        if offset >= 2 ** 32:
+            raise SceneError("the scene's parameter blocks exceed 2^32 floats")
+        result = (np.concatenate(inst_f), np.concatenate(inst_u),
+                  np.concatenate(params + [np.zeros(1, np.float32)]).astype(np.float32))
+        self._materials = np.ascontiguousarray(np.concatenate(mats))
+        self._cache = (key, result)
+        return result
 
     def materials(self) -> np.ndarray:
         """float32 [n, 4]: linear RGB and specular per instance."""
-        return np.array([[*o.material.color, o.material.specular] for o in self.objects], np.float32).reshape(-1, 4)
+        self.instance_buffers()
+        return self._materials

@@ -23,7 +23,7 @@ def test_key_buffer_equals_minimum_at_over_the_same_samples():
     r = renderer_for(scene)
     dev = r.upload(scene, cam)
     settings = pl.RenderSettings()
-    rbuf, n, _, _ = r.lod.run(dev["inst"], len(scene.objects), dev["domains"], dev["cam"], settings.lod)
+    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["count"], dev["domains"], dev["cam"], settings.lod)
     rp = r.lod.read_render_list(n)
     counts = side_counts(rp["ext"][:, 2], settings.points) * side_counts(rp["ext"][:, 3], settings.points)
     offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32)

@@ -1,0 +1,123 @@
+"""Command line: ``paramlod render | info | functions | bench | surfels``."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from .errors import ParamlodError
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+        if w <= 0 or h <= 0:
+            raise ValueError
+        return w, h
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must look like 960x540, got {text!r}") from None
+
+
+def cmd_render(args) -> int:
+    from .render import render
+    from .scenefile import load_scene
+
+    sf = load_scene(args.scene)
+    camera = sf.camera.with_size(args.size) if args.size else sf.camera
+    variant = args.variant or sf.variant
+    frame = render(sf.scene, camera, variant=variant, settings=sf.settings)
+    outs = args.output or [str(Path("out") / (Path(args.scene).stem + ".png"))]
+    for out in outs:
+        frame.save(out)
+    s = frame.stats
+    ms = s["ms"]
+    print(f"{', '.join(outs)}: {camera.width}x{camera.height} {variant} on {s['device']}: "
+          f"{s['render_patches']} render patches, {s['pixels_written']} pixels, "
+          f"LOD {ms['lod']:.1f} ms, render {ms['render']:.1f} ms, total {ms['total']:.1f} ms")
+    if args.stats:
+        Path(args.stats).write_text(json.dumps(s, indent=2))
+    return 0
+
+
+def cmd_info(args) -> int:
+    from . import device
+
+    print("OpenCL")
+    print("  " + device.all_cl_devices_summary().replace("\n", "\n  "))
+    info = device.cl_info()
+    print(f"  selected: {info['device']} ({info['platform']}), {info['type']}, {info['version']}")
+    for k in ("compute_units", "global_memory_mib", "max_work_group_size", "local_memory_kib", "int64_atomics"):
+        print(f"    {k}: {info[k]}")
+    print("OpenGL (EGL, headless)")
+    try:
+        for k, v in device.gl_info().items():
+            print(f"    {k}: {v}")
+    except ParamlodError as exc:
+        print(f"    unavailable: {exc}")
+    return 0
+
+
+def cmd_functions(args) -> int:
+    from .registry import all_functions
+
+    for name, fn in sorted(all_functions().items()):
+        params = ", ".join(
+            f"{p.name}={float(p.default):g}" if not p.is_array else f"{p.name}=[{p.size} values]"
+            for p in fn.params) or "-"
+        print(f"{name:16s} u=[{fn.u_range[0]:.4g}, {fn.u_range[1]:.4g}] v=[{fn.v_range[0]:.4g}, {fn.v_range[1]:.4g}]"
+              f"  params: {params}  ({fn.source})")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from .bench import run_bench
+
+    return run_bench(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="paramlod", description=__doc__)
+    p.add_argument("--cl-device", help="OpenCL device by name substring (or PARAMLOD_CL_DEVICE)")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("render", help="render a TOML scene to PNG and/or EXR")
+    r.add_argument("scene", help="scene file (.toml)")
+    r.add_argument("-o", "--output", action="append", help="output .png or .exr (repeatable)")
+    r.add_argument("--size", type=_size, help="override the camera size, e.g. 1920x1080")
+    r.add_argument("--variant", help="override the render variant (points)")
+    r.add_argument("--stats", help="write the frame statistics as JSON to this file")
+    r.set_defaults(func=cmd_render)
+
+    i = sub.add_parser("info", help="print the OpenCL and OpenGL devices and their capabilities")
+    i.set_defaults(func=cmd_info)
+
+    f = sub.add_parser("functions", help="list the parametric functions")
+    f.set_defaults(func=cmd_functions)
+
+    b = sub.add_parser("bench", help="measure LOD and render times")
+    from .bench import add_arguments
+
+    add_arguments(b)
+    b.set_defaults(func=cmd_bench)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.cl_device:
+            from .device import set_cl_device
+
+            set_cl_device(args.cl_device)
+        return args.func(args)
+    except ParamlodError as exc:
+        print(f"paramlod: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("paramlod: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,132 @@
+"""Scenes, instance arrays, time, scene files and the CLI's error messages."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import paramlod as pl
+from paramlod.cli import main
+from paramlod.scenefile import load_scene
+
+
+def test_instances_render_like_separate_objects():
+    offsets = np.array([[-1.5, 0, 0], [0, 0, 0], [1.5, 0, 0]])
+    tr = np.repeat(np.eye(4)[None], 3, axis=0)
+    tr[:, :3, 3] = offsets
+    a = pl.Scene()
+    a.add_instances("sphere", 3, per_instance={"radius": [0.4, 0.6, 0.5]}, transforms=tr)
+    b = pl.Scene()
+    for off, rad in zip(offsets, [0.4, 0.6, 0.5]):
+        b.add("sphere", params={"radius": rad}, transform=pl.translate(off))
+    cam = pl.Camera.look_at((0, 0.5, 5), (0, 0, 0), size=(128, 64))
+    fa, fb = pl.render(a, cam), pl.render(b, cam)
+    np.testing.assert_array_equal(fa.depth, fb.depth)
+    assert set(np.unique(fa.object_id)) == {0, 1}      # one object, three instances
+    assert set(np.unique(fb.object_id)) == {0, 1, 2, 3}
+
+
+def test_time_drives_the_implicit_parameter():
+    @pl.parametric(u=(0, sp.pi), v=(0, 2 * sp.pi), params={"t": 0.0})
+    def pulsing(u, v, t):
+        r = 0.5 + 0.3 * t
+        return r * sp.sin(u) * sp.cos(v), r * sp.sin(u) * sp.sin(v), r * sp.cos(u)
+
+    scene = pl.Scene()
+    scene.add(pulsing)
+    cam = pl.Camera.look_at((0, 0, 4), (0, 0, 0), size=(96, 96))
+    small = pl.render(scene, cam, time=0.0).coverage.sum()
+    big = pl.render(scene, cam, time=1.0).coverage.sum()
+    assert big > 2 * small
+
+
+def test_bad_parameters_are_named():
+    s = pl.Scene()
+    with pytest.raises(pl.FunctionError, match="no parameter 'radiuss'"):
+        s.add("sphere", params={"radiuss": 2})
+    with pytest.raises(pl.FunctionError, match="unknown function 'spere'.*did you mean sphere"):
+        s.add("spere")
+    with pytest.raises(pl.SceneError, match="per-instance 'radius' must have shape"):
+        s.add_instances("sphere", 3, per_instance={"radius": [1, 2]})
+    with pytest.raises(pl.FunctionError, match="not finite"):
+        s.add("sphere", params={"radius": float("nan")})
+
+
+SCENE = """
+[camera]
+eye = [0, 0, 4]
+size = [64, 48]
+
+[render]
+threshold = 60
+
+[[objects]]
+function = "sphere"
+color = [1.0, 0.5, 0.2]
+"""
+
+
+def test_scene_file_renders(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text(SCENE)
+    sf = load_scene(p)
+    assert sf.camera.size == (64, 48) and sf.settings.lod.threshold == (60.0, 60.0)
+    f = pl.render(sf.scene, sf.camera, settings=sf.settings)
+    assert f.coverage.sum() > 200
+
+
+@pytest.mark.parametrize("text,expect", [
+    (SCENE.replace('function = "sphere"', 'function = "shpere"'), r"s.toml:10: objects\[0\].function: unknown function 'shpere'"),
+    (SCENE + 'params = { radius = "big" }\n', r"s.toml:12: objects\[0\].params"),
+    (SCENE.replace("threshold = 60", "threshold = -1"), r"s.toml:7: render.threshold: must be a positive"),
+    (SCENE.replace("size = [64, 48]", "size = [64]"), r"s.toml:4: camera.size"),
+    (SCENE.replace("color = [1.0, 0.5, 0.2]", "colour = [1.0, 0.5, 0.2]"), r"s.toml:11: objects\[0\].colour: unknown field"),
+    (SCENE.replace("[camera]", "[camera"), r"not valid TOML"),
+])
+def test_malformed_scene_files_name_field_and_line(tmp_path, text, expect):
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    with pytest.raises(pl.SceneError, match=expect):
+        load_scene(p)
+
+
+def test_cli_errors_are_messages_not_tracebacks(tmp_path, capsys):
+    p = tmp_path / "s.toml"
+    p.write_text(SCENE)
+    assert main(["render", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "x.png")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["render", str(p), "-o", str(tmp_path / "nodir" / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "folder" in err and "does not exist" in err and "Traceback" not in err
+    assert main(["render", str(p), "-o", str(tmp_path / "x.jpg")]) == 2
+    assert "unknown image type" in capsys.readouterr().err
+    assert main(["render", str(p), "-o", str(tmp_path / "x.png"), "-o", str(tmp_path / "x.exr")]) == 0
+    assert (tmp_path / "x.png").exists() and (tmp_path / "x.exr").exists()
+    assert not list(tmp_path.glob(".x.*"))  # no temporary files left behind
+
+
+def test_unusable_device_lists_devices(monkeypatch):
+    r = subprocess.run([sys.executable, "-m", "paramlod", "--cl-device", "no-such-gpu", "info"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    assert "no OpenCL device matches 'no-such-gpu'" in r.stderr and "OpenCL devices found" in r.stderr
+    r = subprocess.run([sys.executable, "-m", "paramlod", "info"], capture_output=True, text=True,
+                       env={"OCL_ICD_VENDORS": "/nonexistent", "PATH": "/usr/bin:/bin",
+                            "POCL_DEVICES": "none", "HOME": "/tmp"})
+    # either no platform at all or no device: always a message with the install hint, never a traceback
+    assert "Traceback" not in r.stderr
+
+
+def test_exr_has_all_channels(tmp_path):
+    import OpenEXR
+
+    s = pl.Scene()
+    s.add("sphere")
+    f = pl.render(s, pl.Camera.look_at((0, 0, 4), (0, 0, 0), size=(48, 32)))
+    f.save(tmp_path / "f.exr")
+    with OpenEXR.File(str(tmp_path / "f.exr"), separate_channels=True) as e:
+        ch = e.channels()
+        assert {"R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "objectId"} <= set(ch)
+        assert ch["objectId"].pixels.dtype == np.uint32
+        np.testing.assert_array_equal(ch["Z"].pixels, f.depth)
