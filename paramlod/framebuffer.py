@@ -48,11 +48,21 @@ class KeyBuffer:
         return c, a
 
     def resolve(self) -> Frame:
+        """Decode the keys and copy the result to the host as a Frame."""
+        self.resolve_on_device()
+        return self.read_frame()
+
+    def resolve_on_device(self):
+        """Decode the keys into colour, depth, normal and id buffers on the device."""
+        n = self.pixel_count
+        self._resolve(cl_device().queue, ((n + 255) // 256 * 256,), None, self.color, self.aux,
+                      np.uint32(n), *self._out)
+
+    def read_frame(self) -> Frame:
+        """Copy the resolved buffers to the host as a Frame (after resolve_on_device())."""
         import pyopencl as cl
 
         q = cl_device().queue
-        n = self.pixel_count
-        self._resolve(q, ((n + 255) // 256 * 256,), None, self.color, self.aux, np.uint32(n), *self._out)
         h, w = self.height, self.width
         color = np.empty((h, w, 4), np.float32)
         depth = np.empty((h, w), np.float32)
