@@ -5,6 +5,16 @@
 // splits the half of the patch it lies in (7 patterns, docs/lod.md). The numpy twin of this
 // kernel is paramlod/lod_reference.py: keep both in step.
 
+// Counter layout (paramlod/lod.py): one record of LOD_COUNTERS uints per step; record 0 holds the
+// initial patch count and the render-list total.
+#define LOD_COUNTERS 8
+#define LOD_RENDER_TOTAL 1
+#define C_CHILDREN 0
+#define C_SPLIT 1
+#define C_CULLED 2
+#define C_RENDERED 3
+#define C_FORCED 4
+
 typedef struct {
     float2 s;      // screen position in pixels
     int state;     // 0: in front of the near plane, 1: behind it, 2: NaN/inf sample
@@ -53,18 +63,13 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
     }
 }
 
-__kernel void lod_step(__global const EvalPatch* in, uint n_in,
-                       __global EvalPatch* out, uint out_cap,
-                       __global RenderPatch* render, uint render_cap,
-                       // [children written, render patches, split, culled, rendered, forced]
-                       __global uint* counters,
-                       __global const float* inst_f, __global const uint* inst_u,
-                       __global const float* params, __global const float* cam,
-                       float t_u, float t_v, uint step, uint force)
+inline void lod_patch(EvalPatch patch, __global EvalPatch* out, uint out_cap,
+                      __global RenderPatch* render, uint render_cap,
+                      __global uint* counters, __global uint* render_count,
+                      __global const float* inst_f, __global const uint* inst_u,
+                      __global const float* params, __global const float* cam,
+                      float t_u, float t_v, uint step, uint force)
 {
-    uint gid = get_global_id(0);
-    if (gid >= n_in) return;
-    EvalPatch patch = in[gid];
     uint inst = patch.inst;
     __global const float* I = inst_f + inst * INST_F;
     uint func = inst_u[inst * INST_U + 0];
@@ -100,7 +105,7 @@ __kernel void lod_step(__global const EvalPatch* in, uint n_in,
             code &= q.code; grow_box(&box, q);
         }
     }
-    if (code != 0u) { atomic_inc(&counters[3]); return; }  // every sample outside one clip plane
+    if (code != 0u) { atomic_inc(&counters[C_CULLED]); return; }  // every sample outside one clip plane
 
     bool a = eu[0] > t_u || eu[1] > t_u;   // u-lines in the lower v half
     bool b = eu[2] > t_u || eu[3] > t_u;   // u-lines in the upper v half
@@ -109,7 +114,7 @@ __kernel void lod_step(__global const EvalPatch* in, uint n_in,
     bool split = a || b || c || d;
 
     if (!split || force) {
-        uint slot = atomic_inc(&counters[1]);
+        uint slot = atomic_inc(render_count);
         if (slot < render_cap) {
             RenderPatch r;
             r.range = patch.range;
@@ -122,46 +127,66 @@ __kernel void lod_step(__global const EvalPatch* in, uint n_in,
             r.pad0 = r.pad1 = 0u;
             render[slot] = r;
         }
-        atomic_inc(&counters[4]);
-        if (split) atomic_inc(&counters[5]);
+        atomic_inc(&counters[C_RENDERED]);
+        if (split) atomic_inc(&counters[C_FORCED]);
         return;
     }
 
-    atomic_inc(&counters[2]);
+    atomic_inc(&counters[C_SPLIT]);
     float mu = 0.5f * (u0 + u1), mv = 0.5f * (v0 + v1);
     if ((a || b) && (c || d)) {                 // 1:4
-        uint s = atomic_add(&counters[0], 4u);
+        uint s = atomic_add(&counters[C_CHILDREN], 4u);
         emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
         emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
         emit(out, s + 2, out_cap, u0, mu, mv, v1, inst);
         emit(out, s + 3, out_cap, mu, u1, mv, v1, inst);
     } else if (a && b) {                        // 1:2, cut u
-        uint s = atomic_add(&counters[0], 2u);
+        uint s = atomic_add(&counters[C_CHILDREN], 2u);
         emit(out, s + 0, out_cap, u0, mu, v0, v1, inst);
         emit(out, s + 1, out_cap, mu, u1, v0, v1, inst);
     } else if (c && d) {                        // 1:2, cut v
-        uint s = atomic_add(&counters[0], 2u);
+        uint s = atomic_add(&counters[C_CHILDREN], 2u);
         emit(out, s + 0, out_cap, u0, u1, v0, mv, inst);
         emit(out, s + 1, out_cap, u0, u1, mv, v1, inst);
     } else if (a) {                             // 1:3, lower v half cut in u
-        uint s = atomic_add(&counters[0], 3u);
+        uint s = atomic_add(&counters[C_CHILDREN], 3u);
         emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
         emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
         emit(out, s + 2, out_cap, u0, u1, mv, v1, inst);
     } else if (b) {                             // 1:3, upper v half cut in u
-        uint s = atomic_add(&counters[0], 3u);
+        uint s = atomic_add(&counters[C_CHILDREN], 3u);
         emit(out, s + 0, out_cap, u0, u1, v0, mv, inst);
         emit(out, s + 1, out_cap, u0, mu, mv, v1, inst);
         emit(out, s + 2, out_cap, mu, u1, mv, v1, inst);
     } else if (c) {                             // 1:3, left u half cut in v
-        uint s = atomic_add(&counters[0], 3u);
+        uint s = atomic_add(&counters[C_CHILDREN], 3u);
         emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
         emit(out, s + 1, out_cap, u0, mu, mv, v1, inst);
         emit(out, s + 2, out_cap, mu, u1, v0, v1, inst);
     } else {                                    // 1:3, right u half cut in v
-        uint s = atomic_add(&counters[0], 3u);
+        uint s = atomic_add(&counters[C_CHILDREN], 3u);
         emit(out, s + 0, out_cap, u0, mu, v0, v1, inst);
         emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
         emit(out, s + 2, out_cap, mu, u1, mv, v1, inst);
+    }
+}
+
+// One LOD step. The number of input patches is read on the device (the previous step's child
+// count), so the host records all steps without waiting for any of them and reads the counters
+// once per frame; work-items stride over the patches. A step whose input overflowed its buffer
+// only sees the first `cap` patches: the host detects that afterwards and redoes the stage.
+__kernel void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
+                       __global RenderPatch* render, uint render_cap,
+                       __global uint* counters,   // per step: LOD_COUNTERS uints; see lod.py
+                       __global const float* inst_f, __global const uint* inst_u,
+                       __global const float* params, __global const float* cam,
+                       float t_u, float t_v, uint step, uint force)
+{
+    uint n_in = min(counters[(step - 1) * LOD_COUNTERS + C_CHILDREN], cap);
+    __global uint* c = counters + step * LOD_COUNTERS;
+    __global uint* render_count = counters + LOD_RENDER_TOTAL;
+    for (uint i = get_global_id(0); i < n_in; i += get_global_size(0)) {
+        lod_patch(in[i], out, cap, render, render_cap, c, render_count,
+                  inst_f, inst_u, params, cam, t_u, t_v, step, force);
     }
 }

@@ -1,7 +1,7 @@
 """The LOD stage driver: PATCH INITIALIZATION and up to ``max_steps`` PATCH SUBDIVISION steps
 in OpenCL (kernels/lod.cl), producing the render list for the renderers.
 
-Buffers grow when a step overflows them (the step is redone), up to ``max_patches``; past that
+Buffers grow when a step overflows them (the stage is redone), up to ``max_patches``; past that
 the stage stops with an error that names the limit. Nothing is dropped silently.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 from .device import cl_device
 from .errors import CapacityError, SceneError
 from .patches import EVAL_DTYPE, RENDER_DTYPE, initial_patches
-from .programs import build
+from .programs import kernel
 
 
 @dataclass
@@ -55,61 +55,76 @@ class _Buffer:
         return True
 
 
+LOD_COUNTERS = 8  # per-step counter record in kernels/lod.cl
+C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED = range(5)
+
+
 class LodStage:
     def __init__(self, functions):
-        self.program = build(["lod.cl"], functions)
-        self.kernel = self.program.lod_step
-        self.bufs = [_Buffer(EVAL_DTYPE, 4096), _Buffer(EVAL_DTYPE, 4096)]
-        self.render = _Buffer(RENDER_DTYPE, 4096)
         import pyopencl as cl
 
-        self.counters = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 6 * 4)
+        self.kernel = kernel("lod_step", ["lod.cl"], functions)
+        self.bufs = [_Buffer(EVAL_DTYPE, 4096), _Buffer(EVAL_DTYPE, 4096)]
+        self.render = _Buffer(RENDER_DTYPE, 4096)
+        self.counters = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 16 * LOD_COUNTERS * 4)
+        dev = cl_device()
+        # work-items per step (they stride over the patches): enough to fill the device
+        self.grid = dev.device.max_compute_units * (2048 if dev.is_gpu else 64)
 
     def run(self, inst, n_instances, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
-        """Returns (render buffer, render patch count, per-step stats list, ms)."""
+        """Returns (render buffer, render patch count, per-step stats list, ms).
+
+        All steps are enqueued at once and the counters read back once; if a buffer overflowed,
+        the buffers grow and the whole stage is redone (growth persists across frames).
+        """
         import pyopencl as cl
 
         settings.validate()
+        if len(domains) != n_instances:
+            raise ValueError(f"LodStage.run: {len(domains)} domains for {n_instances} instances")
         q = cl_device().queue
         t0 = time.perf_counter()
         init = initial_patches(domains, settings.initial_grid)
         self._check(len(init), settings, "initial patches")
-        self.bufs[0].ensure(len(init))
-        if len(init):
-            cl.enqueue_copy(q, self.bufs[0].buf, init)
-        n_in, n_render = len(init), 0
         tu, tv = (np.float32(t / t_div) for t in settings.threshold)
-        steps = []
-        counts = np.zeros(6, np.uint32)
-        for step in range(1, settings.max_steps + 1):
-            force = step == settings.max_steps
-            src, dst = self.bufs[(step - 1) % 2], self.bufs[step % 2]
-            if n_in == 0:
-                steps.append({"step": step, "in": 0, "split": 0, "culled": 0, "out": 0, "forced": 0})
-                continue
-            while True:
-                counts[:] = 0
-                counts[1] = n_render
-                cl.enqueue_copy(q, self.counters, counts)
-                self.kernel(q, (_round_up(n_in, 64),), None,
-                            src.buf, np.uint32(n_in), dst.buf, np.uint32(dst.capacity),
+        steps_n = settings.max_steps
+        counts = np.zeros((steps_n + 1, LOD_COUNTERS), np.uint32)
+        while True:
+            for b in self.bufs:
+                b.ensure(len(init))
+            if len(init):
+                cl.enqueue_copy(q, self.bufs[0].buf, init)
+            counts[:] = 0
+            counts[0, C_CHILDREN] = len(init)
+            cl.enqueue_copy(q, self.counters, counts)
+            cap = min(b.capacity for b in self.bufs)
+            grid = min(self.grid, _round_up(max(cap, 1), 64))
+            for step in range(1, steps_n + 1):
+                src, dst = self.bufs[(step - 1) % 2], self.bufs[step % 2]
+                self.kernel(q, (grid,), None, src.buf, dst.buf, np.uint32(cap),
                             self.render.buf, np.uint32(self.render.capacity), self.counters,
-                            *inst, cam_buf, tu, tv, np.uint32(step), np.uint32(force))
-                cl.enqueue_copy(q, counts, self.counters)
-                n_children, total_render = int(counts[0]), int(counts[1])
-                grew = False
-                if n_children > dst.capacity:
-                    self._check(n_children, settings, f"patches after LOD step {step}")
-                    grew |= dst.ensure(n_children)
-                if total_render > self.render.capacity:
-                    self._check(total_render, settings, "render patches")
-                    grew |= self.render.ensure(total_render, keep=n_render)
-                if not grew:
-                    break  # both fitted: the step is complete; otherwise redo it with bigger buffers
-            steps.append({"step": step, "in": n_in, "split": int(counts[2]), "culled": int(counts[3]),
-                          "out": int(counts[4]), "forced": int(counts[5])})
-            n_in, n_render = n_children, total_render
-        q.finish()
+                            *inst, cam_buf, tu, tv, np.uint32(step), np.uint32(step == steps_n))
+            cl.enqueue_copy(q, counts, self.counters)  # blocking: the frame's one sync
+            children = counts[1:, C_CHILDREN].astype(np.int64)
+            n_render = int(counts[0, 1])
+            need = int(children.max(initial=0))
+            grew = False
+            if need > cap:
+                self._check(need, settings, "patches in one LOD step")
+                for b in self.bufs:
+                    grew |= b.ensure(need)
+            if n_render > self.render.capacity:
+                self._check(n_render, settings, "render patches")
+                grew |= self.render.ensure(n_render)
+            if not grew:
+                break
+        steps = []
+        n_in = len(init)
+        for step in range(1, steps_n + 1):
+            c = counts[step]
+            steps.append({"step": step, "in": n_in, "split": int(c[C_SPLIT]), "culled": int(c[C_CULLED]),
+                          "out": int(c[C_RENDERED]), "forced": int(c[C_FORCED])})
+            n_in = int(c[C_CHILDREN])
         return self.render.buf, n_render, steps, (time.perf_counter() - t0) * 1e3
 
     @staticmethod
