@@ -67,6 +67,12 @@ inline uint outcode(float4 c) {
          | (c.y > c.w ? 8u : 0u) | (c.z < -c.w ? 16u : 0u) | (c.z > c.w ? 32u : 0u);
 }
 
+// Unit vector from a view-space point towards the viewer: (0, 0, 1) for an orthographic camera
+// (its projection's last row is (0, 0, 0, 1)), towards the eye for a perspective one.
+inline float3 view_dir(__global const float* cam, float3 e) {
+    return cam[CAM_PROJ + 15] != 0.0f ? (float3)(0.0f, 0.0f, 1.0f) : normalize(-e);
+}
+
 inline bool is_bad3(float3 p) {
     return isnan(p.x) || isnan(p.y) || isnan(p.z) || isinf(p.x) || isinf(p.y) || isinf(p.z);
 }

@@ -25,9 +25,8 @@ inline uint oct10(float3 n) {
 }
 
 // Blinn-Phong with two-sided lighting in view space; returns the sRGB RGBA8 word and the
-// viewer-facing unit normal in view space. `e` is the view-space position.
-inline uint shade(float3 n_view, float3 e, float4 mat, __global const float* light, float3* n_out) {
-    float3 ev = normalize(-e);
+// viewer-facing unit normal in view space. `ev` points towards the viewer (view_dir()).
+inline uint shade(float3 n_view, float3 ev, float4 mat, __global const float* light, float3* n_out) {
     float ln = length(n_view);
     float3 n = (ln > 1e-30f && !isnan(ln)) ? n_view / ln : ev;   // degenerate (poles): face the eye
     if (dot(n, ev) < 0.0f) n = -n;

@@ -66,4 +66,5 @@ class Camera:
         return p
 
     def with_size(self, size) -> "Camera":
+        """The same view at another image size (the aspect ratio follows)."""
         return Camera(self.view.copy(), self.fov_y, (int(size[0]), int(size[1])), self.near, self.far)

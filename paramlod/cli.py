@@ -23,18 +23,30 @@ def cmd_render(args) -> int:
     from .render import render
     from .scenefile import load_scene
 
-    sf = load_scene(args.scene)
-    camera = sf.camera.with_size(args.size) if args.size else sf.camera
-    variant = args.variant or sf.variant
-    frame = render(sf.scene, camera, variant=variant, settings=sf.settings)
+    sf = load_scene(args.scene, size=args.size)
+    camera = sf.camera
+    if args.aa:
+        sf.settings.tess.aa = args.aa
+        sf.settings.tess.validate()
+    if sf.object_variants and not args.variant:
+        from .composite import render_mixed
+
+        variant = "mixed (" + ", ".join(sorted(set(sf.object_variants))) + ")"
+        frame = render_mixed(sf.scene, camera, sf.object_variants, sf.settings, sf.settings.tess)
+    else:
+        variant = args.variant or sf.variant
+        frame = render(sf.scene, camera, variant=variant, settings=sf.settings)
     outs = args.output or [str(Path("out") / (Path(args.scene).stem + ".png"))]
     for out in outs:
         frame.save(out)
     s = frame.stats
     ms = s["ms"]
-    print(f"{', '.join(outs)}: {camera.width}x{camera.height} {variant} on {s['device']}: "
-          f"{s['render_patches']} render patches, {s['pixels_written']} pixels, "
-          f"LOD {ms['lod']:.1f} ms, render {ms['render']:.1f} ms, total {ms['total']:.1f} ms")
+    device = s.get("device") or s.get("lod_device")
+    parts = [f"{camera.width}x{camera.height} {variant}" + (f" on {device}" if device else "")]
+    if "render_patches" in s:
+        parts.append(f"{s['render_patches']} render patches")
+    parts.append(f"{s['pixels_written']} pixels, {ms['total']:.1f} ms")
+    print(f"{', '.join(outs)}: " + ", ".join(parts))
     if args.stats:
         Path(args.stats).write_text(json.dumps(s, indent=2))
     return 0
@@ -65,7 +77,7 @@ def cmd_functions(args) -> int:
         params = ", ".join(
             f"{p.name}={float(p.default):g}" if not p.is_array else f"{p.name}=[{p.size} values]"
             for p in fn.params) or "-"
-        print(f"{name:16s} u=[{fn.u_range[0]:.4g}, {fn.u_range[1]:.4g}] v=[{fn.v_range[0]:.4g}, {fn.v_range[1]:.4g}]"
+        print(f"{name:20s} u=[{fn.u_range[0]:.4g}, {fn.u_range[1]:.4g}] v=[{fn.v_range[0]:.4g}, {fn.v_range[1]:.4g}]"
               f"  params: {params}  ({fn.source})")
     return 0
 
@@ -76,16 +88,26 @@ def cmd_bench(args) -> int:
     return run_bench(args)
 
 
+def cmd_gallery(args) -> int:
+    from .gallery import run_gallery
+
+    return run_gallery(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="paramlod", description=__doc__)
     p.add_argument("--cl-device", help="OpenCL device by name substring (or PARAMLOD_CL_DEVICE)")
+    p.add_argument("--functions", action="append", metavar="DIR",
+                   help="a folder of plugin .py files (repeatable; or PARAMLOD_FUNCTIONS_PATH)")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("render", help="render a TOML scene to PNG and/or EXR")
     r.add_argument("scene", help="scene file (.toml)")
     r.add_argument("-o", "--output", action="append", help="output .png or .exr (repeatable)")
     r.add_argument("--size", type=_size, help="override the camera size, e.g. 1920x1080")
-    r.add_argument("--variant", help="override the render variant (points)")
+    r.add_argument("--variant", help="override the render variant: points, points-ssaa or tess")
+    r.add_argument("--aa", help="anti-aliasing of the tess variant: noAA, msaa2/4/8, ssaa2x2/3x3/4x4, "
+                                "or a combination such as 4xSS+8xMS")
     r.add_argument("--stats", help="write the frame statistics as JSON to this file")
     r.set_defaults(func=cmd_render)
 
@@ -100,6 +122,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_arguments(b)
     b.set_defaults(func=cmd_bench)
+
+    g = sub.add_parser("gallery", help="render every scene of the gallery to PNG, EXR (and GIF)")
+    from .gallery import add_arguments as gallery_arguments
+
+    gallery_arguments(g)
+    g.set_defaults(func=cmd_gallery)
+
+    from paramlod.surfels.cli import add_subparser as surfels_subparser
+
+    surfels_subparser(sub)
     return p
 
 
@@ -110,6 +142,10 @@ def main(argv=None) -> int:
             from .device import set_cl_device
 
             set_cl_device(args.cl_device)
+        for folder in args.functions or []:
+            from .registry import add_plugin_path
+
+            add_plugin_path(folder)
         return args.func(args)
     except ParamlodError as exc:
         print(f"paramlod: error: {exc}", file=sys.stderr)

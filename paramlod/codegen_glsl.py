@@ -1,92 +1,71 @@
-"""Code generation: sympy expressions -> GLSL 4.50 for the tessellation renderer.
+"""Code generation: sympy expressions (or dialect snippets) -> GLSL 4.50 for the tessellation renderer.
 
-The GLSL twin of ``codegen.py``: the same sympy expressions (and the same common-subexpression
-elimination) become, for each function index i,
+The GLSL twin of ``codegen.py``, built on the same pieces (``CLPrinter`` retargeted through its
+``names`` table, ``function_body`` with the same common-subexpression elimination, the snippet
+dialect of ``kernels/dialect.glsl``). For each function index i it defines
 
     vec3 pl_pos_i(float u, float v, uint P)
     void pl_surf_i(float u, float v, uint P, out vec3 pos, out vec3 du, out vec3 dv)
 
 and two dispatchers ``pl_position(func, u, v, P)`` / ``pl_surface(func, u, v, P, pos, du, dv)``
 that switch on the function index. ``P`` is the instance's offset into the shader storage buffer
-``float pl_params[]`` that ``kernels/tess_common.glsl`` declares (the scene's flat parameter array,
-``Scene.instance_buffers()[2]``), so array parameters such as 91 SH coefficients cost nothing extra.
-
-The printer derives from ``codegen.CLPrinter`` so that print methods added there for helper
-functions are inherited; everything that differs between OpenCL C and GLSL (literals, constants,
-``fmin``/``fabs``/``atan2``/``rsqrt``/``cbrt``, the floored ``Mod``) is overridden here. Names that
-GLSL lacks but OpenCL snippets commonly use are also given as small functions in
-``kernels/tess_common.glsl`` (a compatibility prelude).
+``float pl_params[]`` declared in ``kernels/tess_common.glsl`` (the scene's flat parameter array,
+``Scene.instance_buffers()``), so array parameters such as 91 SH coefficients cost nothing extra.
+Partials are analytic (sympy) for expression functions and central differences with the
+function's steps for snippet functions, exactly as in the OpenCL code.
 """
 from __future__ import annotations
 
 import math
 
-import sympy as sp
+from sympy.printing.c import known_functions_C99
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
-from .codegen import CLPrinter
+from .codegen import CLPrinter, function_body, param_lines
 from .errors import FunctionError
 from .function import ParametricFunction
 
-# sympy function name -> GLSL built-in (all take and return float).
+# sympy function name -> GLSL 4.50 built-in (float in, float out)
 GLSL_FUNCTIONS = {
     "sin": "sin", "cos": "cos", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan",
     "sinh": "sinh", "cosh": "cosh", "tanh": "tanh", "asinh": "asinh", "acosh": "acosh", "atanh": "atanh",
     "exp": "exp", "log": "log", "sqrt": "sqrt", "floor": "floor", "ceiling": "ceil",
-    "Abs": "abs", "sign": "sign", "frac": "fract",
+    "Abs": "abs", "sign": "sign", "exp2": "exp2", "log2": "log2",
 }
 
 
-def _literal(x: float) -> str:
+def glsl_literal(x: float) -> str:
+    """A float literal GLSL accepts (no suffix; infinities as 1/0)."""
+    x = float(x)
     if math.isnan(x):
-        raise ValueError("NaN constant")
+        return "uintBitsToFloat(0x7fc00000u)"
     if math.isinf(x):
         return "(1.0 / 0.0)" if x > 0 else "(-1.0 / 0.0)"
-    s = repr(float(x))
-    if "e" in s or "E" in s:
-        mant, exp = s.lower().split("e")
-        if "." not in mant:
-            mant += ".0"
-        return f"{mant}e{exp}"
+    s = repr(x)
+    if "e" in s:
+        mant, exp = s.split("e")
+        return f"{mant if '.' in mant else mant + '.0'}e{exp}"
     return s
 
 
 class GLSLPrinter(CLPrinter):
-    """sympy -> GLSL 4.50 expressions, single precision."""
+    """``CLPrinter`` retargeted to GLSL 4.50 (single precision)."""
 
+    names = {**CLPrinter.names, "min": "min", "max": "max", "abs": "abs", "pown": "pl_pown",
+             "rsqrt": "inversesqrt", "cbrt": "pl_cbrt", "atan2": "atan"}
+    float_suffix = ""
+    local_decl = "const float"
+    bool_decl = "const bool"
+    param_read = "pl_params[P + {}u]"
     _kf = GLSL_FUNCTIONS
-    # an impossible key: never print C math macros (M_LN10, M_SQRT2 ...), which GLSL lacks
-    math_macros = {sp.Symbol("__pl_never__"): "__pl_never__"}
     language = "GLSL"
 
     def __init__(self, settings=None):
         super().__init__(settings)
         self.known_functions = dict(GLSL_FUNCTIONS)
 
-    # --- numbers and constants ------------------------------------------------------------------
-    def _print_Float(self, expr):
-        return _literal(float(expr))
-
-    def _print_Rational(self, expr):
-        return _literal(float(expr))
-
-    def _print_Integer(self, expr):
-        return f"{int(expr)}.0"
-
-    def _print_Pi(self, expr):
-        return _literal(math.pi)
-
-    def _print_Exp1(self, expr):
-        return _literal(math.e)
-
-    def _print_NumberSymbol(self, expr):
-        return _literal(float(expr))
-
-    def _print_Infinity(self, expr):
-        return "(1.0 / 0.0)"
-
-    def _print_NegativeInfinity(self, expr):
-        return "(-1.0 / 0.0)"
+    def _lit(self, x) -> str:
+        return glsl_literal(float(x))
 
     def _print_BooleanTrue(self, expr):
         return "true"
@@ -94,127 +73,102 @@ class GLSLPrinter(CLPrinter):
     def _print_BooleanFalse(self, expr):
         return "false"
 
-    # --- operators and functions ----------------------------------------------------------------
-    def _print_Pow(self, expr):
-        base, ex = expr.as_base_exp()
-        b = self.parenthesize(base, 100)
-        if ex.is_Integer:
-            n = int(ex)
-            if n == 0:
-                return "1.0"
-            mag = "*".join([b] * abs(n)) if abs(n) <= 4 else f"pl_pown({self._print(base)}, {abs(n)})"
-            return f"({mag})" if n > 0 else f"(1.0/({mag}))"
-        if ex == sp.Rational(1, 2):
-            return f"sqrt({self._print(base)})"
-        if ex == -sp.Rational(1, 2):
-            return f"inversesqrt({self._print(base)})"
-        if ex == sp.Rational(1, 3):
-            return f"pl_cbrt({self._print(base)})"
-        # like C's pow, a negative base with a non-integer exponent is NaN in GLSL too
-        return f"pow({self._print(base)}, {self._print(ex)})"
 
-    def _print_Mod(self, expr):
-        # sympy's Mod is floored (the sign of the divisor), which is GLSL's mod()
-        a, b = expr.args
-        return f"mod({self._print(a)}, {self._print(b)})"
+def _no_glsl_form(self, expr, **kwargs):
+    raise PrintMethodNotImplementedError(f"Unsupported by GLSL: {type(expr).__name__}")
 
-    def _print_atan2(self, expr):
-        y, x = expr.args
-        return f"atan({self._print(y)}, {self._print(x)})"
 
-    def _print_Abs(self, expr):
-        return f"abs({self._print(expr.args[0])})"
-
-    def _print_sign(self, expr):
-        return f"sign({self._print(expr.args[0])})"
-
-    def _print_Min(self, expr):
-        args = [self._print(a) for a in expr.args]
-        out = args[0]
-        for a in args[1:]:
-            out = f"min({out}, {a})"
-        return out
-
-    def _print_Max(self, expr):
-        args = [self._print(a) for a in expr.args]
-        out = args[0]
-        for a in args[1:]:
-            out = f"max({out}, {a})"
-        return out
-
-    def _print_Heaviside(self, expr):
-        x = self._print(expr.args[0])
-        h0 = expr.args[1] if len(expr.args) > 1 else sp.Rational(1, 2)
-        return f"(({x}) < 0.0 ? 0.0 : (({x}) > 0.0 ? 1.0 : {self._print(h0)}))"
-
-    def _print_Relational(self, expr):
-        return f"({self._print(expr.lhs)} {expr.rel_op} {self._print(expr.rhs)})"
-
-    def _print_And(self, expr):
-        return "(" + " && ".join(self._print(a) for a in expr.args) + ")"
-
-    def _print_Or(self, expr):
-        return "(" + " || ".join(self._print(a) for a in expr.args) + ")"
-
-    def _print_Not(self, expr):
-        return f"(!{self.parenthesize(expr.args[0], 100)})"
-
+# C99 math functions that GLSL lacks (erf, gamma, hypot, log10 ...): a clear error, not C code
+for _name in set(known_functions_C99) - set(GLSL_FUNCTIONS):
+    if f"_print_{_name}" not in CLPrinter.__dict__:
+        setattr(GLSLPrinter, f"_print_{_name}", _no_glsl_form)
 
 _printer = GLSLPrinter()
 
 
-def glsl_expr(expr, fn: ParametricFunction | None = None) -> str:
-    """One sympy expression as GLSL; an unsupported construct is a FunctionError naming ``fn``."""
-    try:
-        return _printer.doprint(expr)
-    except (PrintMethodNotImplementedError, KeyError, ValueError, TypeError) as exc:
-        who = f"function '{fn.name}' ({fn.source})" if fn is not None else "an expression"
-        bad = sorted({type(f).__name__ for f in sp.preorder_traversal(expr)
-                      if isinstance(f, sp.Function) and type(f).__name__ not in GLSL_FUNCTIONS
-                      and not hasattr(_printer, f"_print_{type(f).__name__}")})
-        what = f"uses {', '.join(bad)}, which has no GLSL form" if bad else f"cannot be printed as GLSL: {exc}"
-        raise FunctionError(f"{who} {what}; the tessellation renderer cannot draw it "
-                            "(rewrite it with elementary functions, or render it with variant='points')") from None
+def glsl_expr(expr) -> str:
+    return _printer.doprint(expr)
 
 
-def _glsl_body(fn: ParametricFunction, exprs) -> tuple[list[str], list[str]]:
-    """Lines that load the parameters and compute CSE temporaries, and the final expressions."""
-    lines = [f"    const float {_printer.doprint(s)} = pl_params[P + {i}u];"
-             for i, s in enumerate(fn.param_symbols)]
-    replacements, reduced = sp.cse(list(exprs), symbols=sp.numbered_symbols("t"), optimizations="basic")
-    for sym, e in replacements:
-        lines.append(f"    const float {sym} = {glsl_expr(e, fn)};")
-    return lines, [glsl_expr(e, fn) for e in reduced]
-
-
-def glsl_function_source(fn: ParametricFunction, index: int) -> str:
-    """GLSL for one function: position-only and position-with-partials entry points."""
-    head = f"// {fn.name} (from {fn.source})\n"
-    lines, (x, y, z) = _glsl_body(fn, fn.exprs)
-    pos = (f"vec3 pl_pos_{index}(float u, float v, uint P) {{\n"
-           + "\n".join(lines) + f"\n    return vec3({x}, {y}, {z});\n}}\n")
-    lines, r = _glsl_body(fn, [*fn.exprs, *fn.du, *fn.dv])
+def _snippet_source(fn: ParametricFunction, index: int, position: bool, surface: bool) -> str:
+    offs = fn.param_offsets()
+    loads = []
+    for p in fn.params:
+        if p.is_array:
+            loads.append(f"    const int {p.name} = {offs[p.name]};  // array: PARAM_AT({p.name}, i)")
+        else:
+            loads.append(f"    const float {p.name} = PARAM({offs[p.name]});")
+    hu, hv = fn.snippet.fd_step
+    snip = (f"vec3 pl_snip_{index}(float u, float v, uint P) {{\n"
+            + "\n".join(loads) + ("\n" if loads else "")
+            + "    // --- snippet ---\n"
+            + "\n".join("    " + line for line in fn.snippet.code.strip("\n").splitlines())
+            + "\n}\n")
+    pos = f"vec3 pl_pos_{index}(float u, float v, uint P) {{\n    return pl_snip_{index}(u, v, P);\n}}\n"
     surf = (f"void pl_surf_{index}(float u, float v, uint P, out vec3 pos, out vec3 du, out vec3 dv) {{\n"
-            + "\n".join(lines)
+            f"    const float hu = {glsl_literal(hu)}, hv = {glsl_literal(hv)};\n"
+            f"    pos = pl_snip_{index}(u, v, P);\n"
+            f"    du = (pl_snip_{index}(u + hu, v, P) - pl_snip_{index}(u - hu, v, P)) * (0.5 / hu);\n"
+            f"    dv = (pl_snip_{index}(u, v + hv, P) - pl_snip_{index}(u, v - hv, P)) * (0.5 / hv);\n}}\n")
+    return snip + (pos if position else "") + (surf if surface else "")
+
+
+def _program_of(fn: ParametricFunction, which: str):
+    """(bindings, outputs) of ``fn`` for "position" (3 outputs) or "surface" (9: f, df/du, df/dv),
+    the same program the OpenCL code is generated from."""
+    return fn.program(which)
+
+
+def glsl_function_source(fn: ParametricFunction, index: int, position: bool = True, surface: bool = True) -> str:
+    """GLSL for one function: the position-only and/or the position-with-partials entry point
+    (a shader stage gets only what it calls: large functions compile slowly on llvmpipe)."""
+    head = f"// {fn.name} (from {fn.source})\n"
+    if fn.is_snippet:
+        return head + _snippet_source(fn, index, position, surface)
+    loads = param_lines(fn, _printer)
+    pos = ""
+    if position:
+        bindings, outputs = _program_of(fn, "position")
+        lines, (x, y, z) = function_body(fn, outputs, _printer, bindings=bindings)
+        pos = (f"vec3 pl_pos_{index}(float u, float v, uint P) {{\n"
+               + "\n".join(loads + lines) + f"\n    return vec3({x}, {y}, {z});\n}}\n")
+    if not surface:
+        return head + pos
+    bindings, outputs = _program_of(fn, "surface")
+    lines, r = function_body(fn, outputs, _printer, bindings=bindings)
+    surf = (f"void pl_surf_{index}(float u, float v, uint P, out vec3 pos, out vec3 du, out vec3 dv) {{\n"
+            + "\n".join(loads + lines)
             + f"\n    pos = vec3({r[0]}, {r[1]}, {r[2]});"
             + f"\n    du = vec3({r[3]}, {r[4]}, {r[5]});"
             + f"\n    dv = vec3({r[6]}, {r[7]}, {r[8]});\n}}\n")
     return head + pos + surf
 
 
-def glsl_dispatch_source(functions: list[ParametricFunction]) -> str:
-    """All functions of a scene plus the dispatchers the shaders call."""
+def glsl_dispatch_source(functions, position: bool = True, surface: bool = True) -> str:
+    """All functions of a scene plus the dispatchers the shaders call (``pl_position`` and/or
+    ``pl_surface``). A function that uses something GLSL lacks is a FunctionError naming it."""
     functions = list(functions)
-    parts = [glsl_function_source(f, i) for i, f in enumerate(functions)]
+    parts = []
+    if any(f.is_snippet for f in functions):
+        from paramlod import kernels
+
+        parts.append("#define PARAM(k) pl_params[P + uint(k)]\n" + kernels.source("dialect.glsl"))
+    try:
+        parts += [glsl_function_source(f, i, position, surface) for i, f in enumerate(functions)]
+    except FunctionError as exc:
+        raise FunctionError(f"{exc} (while generating GLSL for the tessellation renderer; "
+                            "variant='points' does not need GLSL)") from None
     cases_p = "".join(f"        case {i}u: return pl_pos_{i}(u, v, P);\n" for i in range(len(functions)))
     cases_s = "".join(f"        case {i}u: pl_surf_{i}(u, v, P, pos, du, dv); return;\n"
                       for i in range(len(functions)))
-    parts.append(
-        "vec3 pl_position(uint func, float u, float v, uint P) {\n"
-        f"    switch (func) {{\n{cases_p}        default: break;\n    }}\n"
-        "    return vec3(PL_NAN);\n}\n")
-    parts.append(
-        "void pl_surface(uint func, float u, float v, uint P, out vec3 pos, out vec3 du, out vec3 dv) {\n"
-        f"    switch (func) {{\n{cases_s}        default: break;\n    }}\n"
-        "    pos = vec3(PL_NAN); du = vec3(PL_NAN); dv = vec3(PL_NAN);\n}\n")
+    if position:
+        parts.append(
+            "vec3 pl_position(uint func, float u, float v, uint P) {\n"
+            f"    switch (func) {{\n{cases_p}        default: break;\n    }}\n"
+            "    return vec3(NAN);\n}\n")
+    if surface:
+        parts.append(
+            "void pl_surface(uint func, float u, float v, uint P, out vec3 pos, out vec3 du, out vec3 dv) {\n"
+            f"    switch (func) {{\n{cases_s}        default: break;\n    }}\n"
+            "    pos = vec3(NAN); du = vec3(NAN); dv = vec3(NAN);\n}\n")
     return "\n".join(parts)

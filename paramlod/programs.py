@@ -49,6 +49,40 @@ def build(files: list[str], functions=(), defines: dict | None = None):
 
 
 _kernels: dict[tuple, object] = {}
+_timing: list | None = None   # kernel events of the current measurement, when one is running
+
+
+class TimedKernel:
+    """A cl.Kernel whose launches can be timed (``start_timing`` / ``stop_timing``): the benchmark
+    uses the summed kernel durations to separate device time from host (Python) time."""
+
+    def __init__(self, k):
+        self.k = k
+
+    def __call__(self, *args, **kw):
+        evt = self.k(*args, **kw)
+        if _timing is not None:
+            _timing.append(evt)
+        return evt
+
+    def __getattr__(self, name):
+        return getattr(self.k, name)
+
+
+def start_timing() -> None:
+    global _timing
+    _timing = []
+
+
+def stop_timing() -> float:
+    """Milliseconds the recorded kernels ran on the device (waits for them)."""
+    global _timing
+    events, _timing = _timing or [], None
+    total = 0
+    for e in events:
+        e.wait()
+        total += e.profile.end - e.profile.start
+    return total * 1e-6
 
 
 def kernel(name: str, files: list[str], functions=(), defines: dict | None = None):
@@ -59,5 +93,5 @@ def kernel(name: str, files: list[str], functions=(), defines: dict | None = Non
     key = (id(prog), name)
     k = _kernels.get(key)
     if k is None:
-        k = _kernels[key] = cl.Kernel(prog, name)
+        k = _kernels[key] = TimedKernel(cl.Kernel(prog, name))
     return k

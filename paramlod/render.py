@@ -11,10 +11,12 @@ from .device import cl_device
 from .errors import SceneError
 from .framebuffer import KeyBuffer
 from .lod import LodSettings, LodStage
-from .points import DirectPointRenderer, PointSettings
+from .points import COUNTERS, DirectPointRenderer, PointSettings
+from .points_lfb import LocalFramebufferRenderer, SsaaSettings
 from .scene import Scene
+from .tess import TessSettings
 
-VARIANTS = ("points",)
+VARIANTS = ("points", "points-ssaa", "tess")
 # Key light in view space (towards the light: upper left, in front) and the ambient share.
 LIGHT = np.array([*(np.array([-0.35, 0.5, 1.0]) / np.linalg.norm([-0.35, 0.5, 1.0])), 0.12], np.float32)
 
@@ -23,6 +25,8 @@ LIGHT = np.array([*(np.array([-0.35, 0.5, 1.0]) / np.linalg.norm([-0.35, 0.5, 1.
 class RenderSettings:
     lod: LodSettings = field(default_factory=LodSettings)
     points: PointSettings = field(default_factory=PointSettings)
+    ssaa: SsaaSettings = field(default_factory=SsaaSettings)   # the local-framebuffer variant
+    tess: TessSettings = field(default_factory=TessSettings)   # levels, spacing, AA mode
 
 
 def camera_record(camera: Camera) -> np.ndarray:
@@ -38,8 +42,10 @@ class Renderer:
 
     def __init__(self, functions, record: bool = False):
         self.functions = list(functions)
-        self.lod = LodStage(self.functions)
-        self.points = DirectPointRenderer(self.functions, record=record)
+        # a scene of surfels only has no functions and needs no LOD stage
+        self.lod = LodStage(self.functions) if self.functions else None
+        self.points = DirectPointRenderer(self.functions, record=record) if self.functions else None
+        self.ssaa: LocalFramebufferRenderer | None = None   # built on first use
         self.keys: KeyBuffer | None = None
         self._scene_key, self._scene_dev = None, None
 
@@ -50,6 +56,9 @@ class Renderer:
 
         q = cl_device().queue
         key = (id(scene), scene._version, scene.time)
+        if key != self._scene_key and self.lod is None:
+            self._scene_dev = {"light": cla.to_device(q, LIGHT).data}
+            self._scene_key = key
         if key != self._scene_key:
             inst_f, inst_u, params = scene.instance_buffers()
             self._scene_dev = {
@@ -65,16 +74,28 @@ class Renderer:
             self.keys = KeyBuffer(*camera.size)
         return dev
 
-    def render(self, scene: Scene, camera: Camera, settings: RenderSettings):
+    def render(self, scene: Scene, camera: Camera, settings: RenderSettings, variant: str = "points"):
         t0 = time.perf_counter()
         dev = self.upload(scene, camera)
         t1 = time.perf_counter()
-        rbuf, n_render, steps, lod_ms = self.lod.run(dev["inst"], dev["count"], dev["domains"],
-                                                     dev["cam"], settings.lod)
+        t_div = settings.ssaa.lod_divisor if variant == "points-ssaa" else 1.0
+        n_render, steps, lod_ms = 0, [], 0.0
+        if self.lod is not None:
+            rbuf, n_render, steps, lod_ms = self.lod.run(dev["inst"], dev["count"], dev["domains"],
+                                                         dev["cam"], settings.lod, t_div=t_div)
         t2 = time.perf_counter()
         self.keys.clear()
-        counters = self.points.draw(rbuf, n_render, dev["inst"], dev["materials"], dev["cam"],
-                                    dev["light"], self.keys, settings.points)
+        counters = {k: 0 for k in COUNTERS}
+        if self.lod is not None:
+            if variant == "points-ssaa":
+                if self.ssaa is None:
+                    self.ssaa = LocalFramebufferRenderer(self.functions)
+                drawer, opts = self.ssaa, settings.ssaa
+            else:
+                drawer, opts = self.points, settings.points
+            counters = drawer.draw(rbuf, n_render, dev["inst"], dev["materials"], dev["cam"],
+                                   dev["light"], self.keys, opts)
+        surfel_stats = self.draw_surfels(scene, camera)
         cl_device().queue.finish()
         t3 = time.perf_counter()
         self.keys.resolve_on_device()
@@ -85,12 +106,13 @@ class Renderer:
         written = int(np.count_nonzero(np.isfinite(frame.depth)))
         frame.stats = {
             "device": cl_device().name,
-            "variant": "points",
+            "variant": variant,
             "size": list(camera.size),
             "lod_steps": steps,
             "render_patches": n_render,
             "forced_patches": sum(s["forced"] for s in steps),
             **counters,
+            "surfels": surfel_stats,
             "pixels_written": written,
             "overdraw": counters["atomics"] / written if written else 0.0,
             # "frame" is the work of a frame up to resolved buffers on the device (what an
@@ -101,6 +123,16 @@ class Renderer:
         }
         frame.background = scene.background
         return frame
+
+
+    def draw_surfels(self, scene: Scene, camera: Camera) -> list[dict]:
+        """Splat each surfel object's prefix into the same key buffer (composed by depth)."""
+        if not scene.surfels:
+            return []
+        from paramlod.surfels.render import draw_surfels
+
+        return [draw_surfels(self.keys, camera, so.surfels, so.strategy, so.transform, so.object_id, so.specular)
+                for so in scene.surfels]
 
 
 _renderers: dict[tuple, Renderer] = {}
@@ -123,8 +155,23 @@ def render(scene: Scene, camera: Camera, variant: str = "points", settings: Rend
     """
     if variant not in VARIANTS:
         raise SceneError(f"unknown variant '{variant}' (available: {', '.join(VARIANTS)})")
-    if not scene.objects:
-        raise SceneError("the scene has no objects; add one with scene.add(...)")
+    if not scene.objects and not scene.surfels:
+        raise SceneError("the scene has no objects; add one with scene.add(...) or scene.add_surfels(...)")
     if time is not None:
         scene.time = float(time)
-    return renderer_for(scene).render(scene, camera, settings or RenderSettings())
+    settings = settings or RenderSettings()
+    if variant == "tess":
+        from .tess import render_tess
+
+        if not scene.surfels:
+            return render_tess(scene, camera, settings.tess, settings.lod, lod_stage=renderer_for(scene).lod)
+        # surfels are points: draw them with the point path and composite by depth
+        from .composite import composite, subscene
+
+        frames = [render(subscene(scene, [], scene.surfels), camera, "points", settings)]
+        if scene.objects:
+            parametric = subscene(scene, scene.objects)
+            frames.insert(0, render_tess(parametric, camera, settings.tess, settings.lod,
+                                         lod_stage=renderer_for(parametric).lod))
+        return composite(frames, background=scene.background)
+    return renderer_for(scene).render(scene, camera, settings, variant)

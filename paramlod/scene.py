@@ -50,6 +50,18 @@ class SceneObject:
     count: int = 1
     per_instance: dict = field(default_factory=dict)   # name -> array [count] or [count, size]
     transforms: np.ndarray | None = None               # [count, 4, 4] or None
+    colors: np.ndarray | None = None                   # [count, 3] linear RGB, or None
+
+
+@dataclass
+class SurfelObject:
+    """A blue-surfel set drawn as a view-dependent prefix (paramlod.surfels)."""
+
+    surfels: object            # paramlod.surfels.SurfelSet
+    transform: np.ndarray
+    strategy: object           # FixedSize (default 2 px), FixedCount or FrameTimeAdaptive
+    object_id: int
+    specular: float = 0.25
 
 
 def _param_columns(fn: ParametricFunction) -> dict[str, slice]:
@@ -76,6 +88,7 @@ def _blocks(fn: ParametricFunction, shared: dict, per_instance: dict, count: int
 class Scene:
     def __init__(self, background=(0.12, 0.12, 0.14), time: float = 0.0):
         self.objects: list[SceneObject] = []
+        self.surfels: list[SurfelObject] = []
         self.background = tuple(float(x) for x in background)
         self.time = float(time)
         self._version = 0
@@ -86,14 +99,16 @@ class Scene:
         return self.add_instances(fn_or_name, 1, params=params, transform=transform, material=material)
 
     def add_instances(self, fn_or_name, count: int, params: dict | None = None, per_instance: dict | None = None,
-                      transforms=None, transform=None, material: Material | None = None) -> SceneObject:
+                      transforms=None, transform=None, material: Material | None = None,
+                      colors=None) -> SceneObject:
         """Add ``count`` instances of one function as one object (one object id, one material).
 
         ``per_instance`` maps parameter names to arrays with ``count`` rows; ``transforms`` is an
-        optional [count, 4, 4] array applied before ``transform``.
+        optional [count, 4, 4] array applied before ``transform``; ``colors`` an optional
+        [count, 3] array of linear RGB in [0, 1] that replaces the material colour per instance.
         """
         fn = get_function(fn_or_name)
-        if len(self.objects) >= MAX_OBJECTS:
+        if self.object_count >= MAX_OBJECTS:
             raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits); "
                              "use add_instances for many copies of one function")
         count = int(count)
@@ -123,15 +138,38 @@ class Scene:
             transforms = np.asarray(transforms, dtype=np.float64)
             if transforms.shape != (count, 4, 4) or not np.all(np.isfinite(transforms)):
                 raise SceneError(f"'{fn.name}': transforms must be a finite [{count}, 4, 4] array, got {transforms.shape}")
+        if colors is not None:
+            colors = np.asarray(colors, dtype=np.float32)
+            if colors.shape != (count, 3) or not np.all((colors >= 0) & (colors <= 1)):
+                raise SceneError(f"'{fn.name}': colors must be a [{count}, 3] array of values in [0, 1]")
         m = np.eye(4) if transform is None else _as_matrix(transform)
-        obj = SceneObject(fn, params, m, material or Material(), len(self.objects) + 1, count, per, transforms)
+        obj = SceneObject(fn, params, m, material or Material(), self.object_count + 1, count, per, transforms,
+                          colors)
         self.objects.append(obj)
         self._version += 1
         return obj
 
+    def add_surfels(self, path_or_set, transform=None, strategy=None, specular: float = 0.25) -> SurfelObject:
+        """Add a ``.surfels`` file or SurfelSet; ``strategy`` picks the prefix each frame
+        (paramlod.surfels.FixedSize(2) by default, FixedCount, FrameTimeAdaptive)."""
+        from paramlod.surfels.format import load_surfels
+        from paramlod.surfels.render import FixedSize
+
+        if self.object_count >= MAX_OBJECTS:
+            raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits)")
+        m = np.eye(4) if transform is None else _as_matrix(transform)
+        obj = SurfelObject(load_surfels(path_or_set), m, strategy or FixedSize(), self.object_count + 1, specular)
+        self.surfels.append(obj)
+        return obj
+
+    @property
+    def object_count(self) -> int:
+        return len(self.objects) + len(self.surfels)
+
     @property
     def instance_count(self) -> int:
-        return len(self._expanded()[0])
+        """Parametric instances, parts included (surfel objects not counted)."""
+        return sum(len(models) for _, models, _, _, _ in self._expanded())
 
     def functions(self) -> list[ParametricFunction]:
         """Distinct functions, parts included, in first-use order; the index is the kernel's id."""
@@ -150,7 +188,7 @@ class Scene:
 
     # --- flattening ------------------------------------------------------------------------
     def _expanded(self):
-        """Groups (function, model matrices [n,4,4], blocks [n,k], object id, material)."""
+        """Groups (function, model matrices [n,4,4], blocks [n,k], object id, materials [n,4])."""
         groups = []
 
         def place(fn, models, blocks, oid, mat, depth):
@@ -163,17 +201,29 @@ class Scene:
                 frames = np.stack([fn.surface_frame(u, v, b) for b in blocks])
                 local = np.asarray(part.transform if part.transform is not None else np.eye(4), np.float64)
                 cmodels = models @ frames @ local
-                cblocks = _blocks(child, dict(part.params or {}), {}, len(blocks), self.time)
-                cmat = Material(part.color, mat.specular) if getattr(part, "color", None) is not None else mat
+                # parameters named in part.inherit (default: t) flow from each parent instance
+                cparams, inherited = dict(part.params or {}), {}
+                pcols, cdefs = _param_columns(fn), {p.name: p for p in child.params}
+                for name in getattr(part, "inherit", ("t",)):
+                    if name in cdefs and name in pcols and name not in cparams:
+                        col = blocks[:, pcols[name]]
+                        inherited[name] = col if cdefs[name].is_array else col[:, 0]
+                cblocks = _blocks(child, cparams, inherited, len(blocks), self.time)
+                cmat = mat.copy()
+                if getattr(part, "color", None) is not None:
+                    cmat[:, :3] = part.color
                 place(child, cmodels, cblocks, oid, cmat, depth + 1)
 
         for o in self.objects:
             models = np.broadcast_to(o.transform, (o.count, 4, 4))
             if o.transforms is not None:
                 models = o.transform @ o.transforms
+            mats = np.tile(np.array([*o.material.color, o.material.specular], np.float32), (o.count, 1))
+            if o.colors is not None:
+                mats[:, :3] = o.colors
             place(o.function, np.asarray(models, np.float64),
                   _blocks(o.function, o.params, o.per_instance, o.count, self.time),
-                  o.object_id, o.material, 0)
+                  o.object_id, mats, 0)
         return groups
 
     def instance_buffers(self):
@@ -204,7 +254,11 @@ class Scene:
             inst_f.append(f)
             inst_u.append(u)
             params.append(blocks.reshape(-1))
-            mats.append(np.broadcast_to(np.array([*mat.color, mat.specular], np.float32), (n, 4)))
+            mats.append(mat)
+        if not groups:
+            inst_f.append(np.zeros((0, INST_FLOATS), np.float32))
+            inst_u.append(np.zeros((0, INST_UINTS), np.uint32))
+            mats.append(np.zeros((0, 4), np.float32))
         if offset >= 2 ** 32:
             raise SceneError("the scene's parameter blocks exceed 2^32 floats")
         result = (np.concatenate(inst_f), np.concatenate(inst_u),

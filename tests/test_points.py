@@ -7,13 +7,12 @@ import paramlod as pl
 from paramlod.device import cl_device
 from paramlod.framebuffer import KeyBuffer
 from paramlod.points import DirectPointRenderer, side_counts
-from paramlod.render import LIGHT, camera_record, renderer_for
+from paramlod.render import renderer_for
 
 from conftest import iou, sphere_disc
 
 
 def test_key_buffer_equals_minimum_at_over_the_same_samples():
-    import pyopencl as cl
     import pyopencl.array as cla
 
     scene = pl.Scene()

@@ -130,3 +130,15 @@ def test_exr_has_all_channels(tmp_path):
         assert {"R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "objectId"} <= set(ch)
         assert ch["objectId"].pixels.dtype == np.uint32
         np.testing.assert_array_equal(ch["Z"].pixels, f.depth)
+
+
+def test_per_instance_colours():
+    tr = np.repeat(np.eye(4)[None], 2, axis=0)
+    tr[:, 0, 3] = [-1.2, 1.2]
+    s = pl.Scene()
+    s.add_instances("sphere", 2, transforms=tr, colors=[[1, 0, 0], [0, 0, 1]])
+    f = pl.render(s, pl.Camera.look_at((0, 0, 5), (0, 0, 0), size=(128, 64)))
+    left, right = f.color[:, :64][f.coverage[:, :64]], f.color[:, 64:][f.coverage[:, 64:]]
+    assert left[:, 0].mean() > 3 * left[:, 2].mean() and right[:, 2].mean() > 3 * right[:, 0].mean()
+    with pytest.raises(pl.SceneError, match=r"colors must be a \[2, 3\] array"):
+        s.add_instances("sphere", 2, colors=[[2, 0, 0], [0, 0, 1]])

@@ -1,0 +1,64 @@
+// Shared by the tessellation renderer's shader stages (paramlod/tess.py). tess.py prepends
+// "#version 450 core" and the PL_* defines; the tessellation stages then get this file, the
+// generated function code (paramlod/codegen_glsl.py: pl_position, pl_surface) and their own file.
+
+#define PL_NAN uintBitsToFloat(0x7fc00000u)
+#define PL_INF uintBitsToFloat(0x7f800000u)
+#define NAN PL_NAN          // generated code: a Piecewise without a default branch
+#define INFINITY PL_INF
+
+// Scene data (Scene.instance_buffers(), Scene.materials()), read-only shader storage buffers.
+layout(std430, binding = 0) readonly buffer PlParams { float pl_params[]; };   // flat parameter blocks
+layout(std430, binding = 1) readonly buffer PlInstF { float pl_inst_f[]; };    // [n][32] floats
+layout(std430, binding = 2) readonly buffer PlInstU { uint pl_inst_u[]; };     // [n][4] uints
+layout(std430, binding = 3) readonly buffer PlMaterials { vec4 pl_materials[]; };
+// Counters read back into Frame.stats: NaN vertices (evaluation stage), the device's real sample
+// count per pixel of the multisampled targets (resolve pass).
+layout(std430, binding = 4) buffer PlCounters { uint pl_nan_vertices; uint pl_device_samples; };
+
+// Instance record offsets (paramlod/scene.py, kernels/common.cl).
+#define PL_INST_F 32u
+#define PL_INST_U 4u
+#define PL_INST_MODEL 0u
+#define PL_INST_NORMAL 16u
+#define PL_INST_DOMAIN 28u
+
+uniform mat4 u_view;        // world -> view
+uniform mat4 u_proj;        // view -> clip
+uniform vec2 u_screen;      // output width, height in pixels (the LOD stage's pixels)
+
+// rows of 4 floats starting at pl_inst_f[base]: the 3x4 affine part applied to a point / direction
+vec3 pl_rows_point(uint base, vec3 p) {
+    return vec3(pl_inst_f[base + 0u] * p.x + pl_inst_f[base + 1u] * p.y + pl_inst_f[base + 2u] * p.z + pl_inst_f[base + 3u],
+                pl_inst_f[base + 4u] * p.x + pl_inst_f[base + 5u] * p.y + pl_inst_f[base + 6u] * p.z + pl_inst_f[base + 7u],
+                pl_inst_f[base + 8u] * p.x + pl_inst_f[base + 9u] * p.y + pl_inst_f[base + 10u] * p.z + pl_inst_f[base + 11u]);
+}
+
+vec3 pl_rows_dir(uint base, vec3 d) {
+    return vec3(pl_inst_f[base + 0u] * d.x + pl_inst_f[base + 1u] * d.y + pl_inst_f[base + 2u] * d.z,
+                pl_inst_f[base + 4u] * d.x + pl_inst_f[base + 5u] * d.y + pl_inst_f[base + 6u] * d.z,
+                pl_inst_f[base + 8u] * d.x + pl_inst_f[base + 9u] * d.y + pl_inst_f[base + 10u] * d.z);
+}
+
+vec4 pl_domain(uint inst) {
+    uint b = inst * PL_INST_F + PL_INST_DOMAIN;
+    return vec4(pl_inst_f[b], pl_inst_f[b + 1u], pl_inst_f[b + 2u], pl_inst_f[b + 3u]);
+}
+
+bool pl_bad3(vec3 p) {
+    return any(isnan(p)) || any(isinf(p));
+}
+
+// a + (b - a) t, exact at both ends, so that neighbouring patches evaluate a shared edge at the
+// very same parameters
+float pl_lerp(float a, float b, float t) {
+    return t >= 1.0 ? b : a + (b - a) * t;
+}
+
+// --- helpers the generated code calls (GLSLPrinter.names) --------------------------------------
+float pl_pown(float x, int n) {
+    float r = 1.0, b = x;
+    for (int k = n; k > 0; k >>= 1) { if ((k & 1) != 0) r *= b; b *= b; }
+    return r;
+}
+float pl_cbrt(float x) { return sign(x) * pow(abs(x), 1.0 / 3.0); }

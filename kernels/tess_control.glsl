@@ -1,0 +1,90 @@
+// Tessellation control stage: one invocation per render patch sets its tessellation levels
+// (docs/tessellation.md).
+//   fixed:    inner = u_level.x on both axes, outer = u_level.y on all four edges
+//   adaptive: l = clamp(e * L / min(t, L), l_min, l_max) (thesis 5.5.2), with
+//             inner 0 (along u) from the LOD stage's e_u, inner 1 (along v) from e_v, and each
+//             outer level from the screen length of that edge itself, measured here from 8
+//             samples of the edge. Two patches that share an edge measure it from the same
+//             parameters, so they compute the same outer level and their vertices on it coincide.
+// The parameter range handed to the evaluation stage is widened by u_overlap of its size per
+// side (clamped to the function's domain) so that T-junctions between patches of different size
+// are covered.
+layout(vertices = 1) out;
+
+in vec4 vs_range[];
+in vec4 vs_ext[];
+flat in uint vs_inst[];
+
+patch out vec4 tc_range;     // widened parameter range
+patch out vec4 tc_core;      // the patch's own range (for pole normals)
+patch out uint tc_inst;
+
+uniform vec2 u_threshold;    // effective LOD thresholds t_u, t_v in output pixels
+uniform vec2 u_level;        // fixed: (inner, outer); adaptive: base level L for (inner, outer)
+uniform vec2 u_clamp;        // l_min, l_max
+uniform int u_adaptive;
+uniform float u_near;
+uniform float u_overlap;
+
+float pl_adaptive(float e, float L, float t) {
+    float l = e * L / min(t, L);
+    return clamp(isnan(l) ? u_clamp.x : l, u_clamp.x, u_clamp.y);
+}
+
+void main() {
+    vec4 r = vs_range[0];
+    uint inst = vs_inst[0];
+    if (gl_InvocationID == 0) {
+        if (u_adaptive != 0) {
+            uint func = pl_inst_u[inst * PL_INST_U + 0u];
+            uint P = pl_inst_u[inst * PL_INST_U + 1u];
+            uint M = inst * PL_INST_F + PL_INST_MODEL;
+            // quad domain: outer 0 is the edge u = u0, 1 is v = v0, 2 is u = u1, 3 is v = v1;
+            // each edge's screen polyline through 8 samples (one call site of pl_position, so
+            // that the function's code is inlined once)
+            vec4 a = vec4(r.x, r.x, r.y, r.x);   // edge start u
+            vec4 b = vec4(r.x, r.y, r.y, r.y);   // edge end u
+            vec4 c = vec4(r.z, r.z, r.z, r.w);   // edge start v
+            vec4 d = vec4(r.w, r.z, r.w, r.w);   // edge end v
+            float len[4] = float[4](0.0, 0.0, 0.0, 0.0);
+            for (int e = 0; e < 4; ++e) {
+                vec2 prev = vec2(0.0);
+                int prev_state = 2;
+                for (int i = 0; i < 8; ++i) {
+                    float f = float(i) / 7.0;
+                    vec3 p = pl_position(func, pl_lerp(a[e], b[e], f), pl_lerp(c[e], d[e], f), P);
+                    int state = 2;                       // 0 ok, 1 behind the near plane, 2 NaN/inf
+                    vec2 s = vec2(0.0);
+                    if (!pl_bad3(p)) {
+                        vec4 q = u_proj * (u_view * vec4(pl_rows_point(M, p), 1.0));
+                        state = q.w >= u_near ? 0 : 1;
+                        s = vec2((q.x / q.w * 0.5 + 0.5) * u_screen.x, (0.5 - q.y / q.w * 0.5) * u_screen.y);
+                    }
+                    if (i > 0) {
+                        if (state == 1 || prev_state == 1) len[e] = PL_INF;   // unmeasurable: finest
+                        else if (state == 0 && prev_state == 0) len[e] += length(s - prev);
+                    }
+                    prev = s;
+                    prev_state = state;
+                }
+            }
+            float L = u_level.y;
+            gl_TessLevelOuter[0] = pl_adaptive(len[0], L, u_threshold.y);
+            gl_TessLevelOuter[1] = pl_adaptive(len[1], L, u_threshold.x);
+            gl_TessLevelOuter[2] = pl_adaptive(len[2], L, u_threshold.y);
+            gl_TessLevelOuter[3] = pl_adaptive(len[3], L, u_threshold.x);
+            gl_TessLevelInner[0] = pl_adaptive(vs_ext[0].x, u_level.x, u_threshold.x);
+            gl_TessLevelInner[1] = pl_adaptive(vs_ext[0].y, u_level.x, u_threshold.y);
+        } else {
+            gl_TessLevelOuter[0] = u_level.y; gl_TessLevelOuter[1] = u_level.y;
+            gl_TessLevelOuter[2] = u_level.y; gl_TessLevelOuter[3] = u_level.y;
+            gl_TessLevelInner[0] = u_level.x; gl_TessLevelInner[1] = u_level.x;
+        }
+        vec4 dom = pl_domain(inst);
+        float wu = (r.y - r.x) * u_overlap, wv = (r.w - r.z) * u_overlap;
+        tc_range = vec4(max(r.x - wu, dom.x), min(r.y + wu, dom.y), max(r.z - wv, dom.z), min(r.w + wv, dom.w));
+        tc_core = r;
+        tc_inst = inst;
+    }
+    gl_out[gl_InvocationID].gl_Position = vec4(0.0, 0.0, 0.0, 1.0);
+}

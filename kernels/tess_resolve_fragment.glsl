@@ -1,0 +1,58 @@
+// Resolve pass: one invocation per output pixel gathers its PL_SS x PL_SS block of the
+// (super-sampled) targets.
+//   colour: the hardware multisample resolve (already done into u_color by a framebuffer blit)
+//           box-averaged over the block; the average is premultiplied by coverage, so alpha is the
+//           covered fraction of all samples and RGB is divided by it (straight alpha, as in Frame).
+//   depth, normal, object id: those of the nearest covered sample among all PL_SS^2 x PL_SAMPLES
+//           samples (depth 0 = not covered; the loop runs over the samples the device really
+//           allocated, which can be more than requested: llvmpipe gives 4 for a 2xMS request), +inf / 0 / 0 where no sample is covered. This matches
+//           the point renderer, whose atom_min keeps the nearest sample of a pixel.
+#ifdef PL_MS
+uniform sampler2DMS u_depth;
+uniform sampler2DMS u_normal;
+uniform usampler2DMS u_object;
+#define PL_FETCH(t, q, s) texelFetch(t, q, s)
+#define PL_DEVICE_SAMPLES textureSamples(u_depth)
+#else
+uniform sampler2D u_depth;
+uniform sampler2D u_normal;
+uniform usampler2D u_object;
+#define PL_FETCH(t, q, s) texelFetch(t, q, 0)
+#define PL_DEVICE_SAMPLES 1
+#endif
+uniform sampler2D u_color;
+
+layout(location = 0) out vec4 out_color;
+layout(location = 1) out float out_depth;
+layout(location = 2) out vec4 out_normal;
+layout(location = 3) out uint out_object;
+
+void main() {
+    ivec2 p = ivec2(gl_FragCoord.xy);
+    int ns = PL_DEVICE_SAMPLES;
+    if (p == ivec2(0)) pl_device_samples = uint(ns);
+    vec4 c = vec4(0.0);
+    float best = PL_INF;
+    vec3 n = vec3(0.0);
+    uint id = 0u;
+    for (int sy = 0; sy < PL_SS; ++sy) {
+        for (int sx = 0; sx < PL_SS; ++sx) {
+            ivec2 q = p * PL_SS + ivec2(sx, sy);
+            c += texelFetch(u_color, q, 0);
+            for (int s = 0; s < ns; ++s) {
+                float d = PL_FETCH(u_depth, q, s).r;
+                if (d > 0.0 && d < best) {
+                    best = d;
+                    n = PL_FETCH(u_normal, q, s).xyz;
+                    id = PL_FETCH(u_object, q, s).r;
+                }
+            }
+        }
+    }
+    c /= float(PL_SS * PL_SS);
+    out_color = c.a > 0.0 ? vec4(c.rgb / c.a, c.a) : vec4(0.0);
+    out_depth = best;
+    float ln = length(n);
+    out_normal = vec4(ln > 0.0 ? n / ln : vec3(0.0), 0.0);
+    out_object = id;
+}

@@ -1,0 +1,137 @@
+"""numpy reference of the local-framebuffer point renderer (kernels/points_lfb.cl), for small scenes.
+
+Given the samples the kernel evaluated (its PL_RECORD hook: each sample's global subsample index
+and its colour and attribute keys), it repeats the algorithm with numpy: the padded screen box of
+each patch and the tiles it touches, per-tile patch lists, the local framebuffers (a sample is kept
+only when its patch is listed for the tile it lands in, smallest key wins), and the integer
+resolve. The result must equal the kernel's key buffers bit for bit.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+CLEAR = np.uint64(0xFFFFFFFFFFFFFFFF)
+LIN_BITS = 24   # fixed-point scale of linear colour in the resolve: 9 x 2^24 fits in 32 bits
+
+
+def _srgb_to_linear(s: np.ndarray) -> np.ndarray:
+    return np.where(s <= 0.04045, s / 12.92, ((s + 0.055) / 1.055) ** 2.4)
+
+
+def srgb_tables() -> tuple[np.ndarray, np.ndarray]:
+    """(lin, thr), uint32 [256] each: lin[c] = linear value of sRGB code c in 2^-24 units;
+    thr[c] = linear value of code c - 1/2 (thr[0] = 0), so encoding x gives the largest c with
+    thr[c] <= x, the nearest code in sRGB space."""
+    scale = float(1 << LIN_BITS)
+    codes = np.arange(256, dtype=np.float64)
+    lin = np.rint(_srgb_to_linear(codes / 255.0) * scale).astype(np.uint32)
+    thr = np.rint(_srgb_to_linear(np.maximum(codes - 0.5, 0.0) / 255.0) * scale).astype(np.uint32)
+    thr[0] = 0
+    return lin, thr
+
+
+def encode_srgb8(x: np.ndarray, thr: np.ndarray) -> np.ndarray:
+    """Twin of encode_srgb8() in points_lfb.cl."""
+    return (np.searchsorted(thr, np.asarray(x, np.uint32), side="right") - 1).astype(np.uint32)
+
+
+def tile_grid(width: int, height: int, tile: int = 16) -> tuple[int, int]:
+    return -(-int(width) // tile), -(-int(height) // tile)
+
+
+def tile_rects(render_list: np.ndarray, width: int, height: int, margin: float, widen: float,
+               tile: int = 16) -> np.ndarray:
+    """Twin of tile_rect() in points_lfb.cl: int32 [n, 4] inclusive tile rectangles
+    (x0, y0, x1, y1); (0, 0, -1, -1) for a patch that touches no tile."""
+    f32 = np.float32
+    tiles_x, tiles_y = tile_grid(width, height, tile)
+    box = render_list["bbox"].astype(f32)
+    ext = render_list["ext"].astype(f32)
+    W, H, T = f32(width), f32(height), f32(tile)
+    with np.errstate(invalid="ignore", over="ignore"):
+        pad = f32(margin) + np.fmax(ext[:, 2], ext[:, 3]) * (f32(1) / f32(7) + f32(widen))
+        unbounded = ~(pad < f32(np.inf))
+        x0, y0 = box[:, 0] - pad, box[:, 1] - pad
+        x1, y1 = box[:, 2] + pad, box[:, 3] + pad
+        valid = (box[:, 0] <= box[:, 2]) & (box[:, 1] <= box[:, 3])
+        off = (x1 < 0) | (y1 < 0) | (x0 >= W) | (y0 >= H)
+        place = unbounded | (valid & ~off)
+        x0 = np.where(unbounded, f32(0), np.fmax(x0, f32(0)))
+        y0 = np.where(unbounded, f32(0), np.fmax(y0, f32(0)))
+        x1 = np.where(unbounded, W, np.fmin(x1, W))
+        y1 = np.where(unbounded, H, np.fmin(y1, H))
+        out = np.zeros((len(render_list), 4), np.int64)
+        for col, (v, lim) in enumerate(((x0, tiles_x), (y0, tiles_y), (x1, tiles_x), (y1, tiles_y))):
+            t = np.floor(np.where(place, v, f32(0)) / T)
+            out[:, col] = np.minimum(t.astype(np.int64), lim - 1)
+    out[~place] = (0, 0, -1, -1)
+    return out.astype(np.int32)
+
+
+def tile_lists(rects: np.ndarray, width: int, height: int, tile: int = 16):
+    """Per-tile patch lists from the rectangles: (counts uint32 [tiles], offsets uint32 [tiles]
+    = exclusive scan of counts, pairs uint32 [total] = patch ids, each tile's ids ascending)."""
+    tiles_x, tiles_y = tile_grid(width, height, tile)
+    tiles, pids = [], []
+    for pid, (x0, y0, x1, y1) in enumerate(np.asarray(rects)):
+        if x1 < x0:
+            continue
+        ys, xs = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+        tiles.append((ys * tiles_x + xs).reshape(-1))
+        pids.append(np.full(xs.size, pid))
+    tiles = np.concatenate(tiles) if tiles else np.zeros(0, np.int64)
+    pids = np.concatenate(pids) if pids else np.zeros(0, np.int64)
+    order = np.lexsort((pids, tiles))
+    counts = np.bincount(tiles, minlength=tiles_x * tiles_y).astype(np.uint32)
+    offsets = (np.cumsum(counts, dtype=np.uint64) - counts).astype(np.uint32)
+    return counts, offsets, pids[order].astype(np.uint32)
+
+
+def lfb_keys(rects: np.ndarray, sample_patch: np.ndarray, sub: np.ndarray, key: np.ndarray,
+             aux: np.ndarray, width: int, height: int, ss: int, tile: int = 16):
+    """The key buffers the local-framebuffer renderer produces from cleared buffers.
+
+    Per sample: its patch id, its global subsample index (row-major over (height*ss, width*ss),
+    0xFFFFFFFF when not drawable), its colour and attribute keys. Returns (colour, aux) uint64
+    (height, width) and a dict of the counts that do not depend on execution order."""
+    lin, thr = srgb_tables()
+    side = tile * ss
+    SW, SH = width * ss, height * ss
+    sub = np.asarray(sub, np.uint32)
+    drawable = sub != np.uint32(0xFFFFFFFF)
+    s = sub[drawable].astype(np.int64)
+    p = np.asarray(sample_patch)[drawable]
+    k = np.asarray(key, np.uint64)[drawable]
+    a = np.asarray(aux, np.uint64)[drawable]
+    sx, sy = s % SW, s // SW
+    stx, sty = sx // side, sy // side
+    r = np.asarray(rects)[p]
+    kept = (stx >= r[:, 0]) & (stx <= r[:, 2]) & (sty >= r[:, 1]) & (sty <= r[:, 3])
+    lc = np.full(SW * SH, CLEAR, np.uint64)
+    la = np.full(SW * SH, CLEAR, np.uint64)
+    np.minimum.at(lc, s[kept], k[kept])
+    np.minimum.at(la, s[kept], a[kept])
+    # resolve: blocks of ss x ss subsamples -> one pixel
+    lc = lc.reshape(height, ss, width, ss).transpose(0, 2, 1, 3).reshape(height, width, ss * ss)
+    la = la.reshape(height, ss, width, ss).transpose(0, 2, 1, 3).reshape(height, width, ss * ss)
+    cov = lc != CLEAR
+    cnt = cov.sum(axis=-1).astype(np.uint64)
+    low = (lc & np.uint64(0xFFFFFFFF)).astype(np.uint64)
+    sums = []
+    for shift in (24, 16, 8):
+        ch = ((low >> np.uint64(shift)) & np.uint64(255)).astype(np.int64)
+        sums.append(np.where(cov, lin[ch].astype(np.uint64), np.uint64(0)).sum(axis=-1))
+    safe = np.maximum(cnt, 1)
+    half = cnt >> np.uint64(1)
+    rgba = np.zeros((height, width), np.uint64)
+    for shift, total in zip((24, 16, 8), sums):
+        rgba |= encode_srgb8((total + half) // safe, thr).astype(np.uint64) << np.uint64(shift)
+    n2 = ss * ss
+    rgba |= (cnt * np.uint64(255) + np.uint64(n2 // 2)) // np.uint64(n2)
+    kmin = lc.min(axis=-1)
+    color = np.where(cnt > 0, (kmin & np.uint64(0xFFFFFFFF00000000)) | rgba, CLEAR)
+    auxo = np.where(cnt > 0, la.min(axis=-1), CLEAR)
+    stats = {"pixels": int(np.count_nonzero(cnt)), "covered": int(cnt.sum()),
+             # a sample lands in one tile, which renders it once if it lists the sample's patch
+             "hits": int(np.count_nonzero(kept)), "bbox_miss": int(np.count_nonzero(~kept))}
+    return color.astype(np.uint64), auxo.astype(np.uint64), stats

@@ -1,0 +1,239 @@
+"""The surfel prefix renderer (kernels/surfels_splat.cl).
+
+Render law (Brandt et al. 2019): a prefix of n surfels has a spacing of r = sqrt(packing / n), so
+for a wanted spacing r the prefix is n = packing / r^2. A surfel size of s pixels at the object's
+distance d gives r = s * pixel(d) / 2, where pixel(d) is the world size of one pixel at view depth d
+(2 d / (P[1,1] H) for a perspective camera, 2 / (P[1,1] H) for an orthographic one). Discs are drawn
+with radius r, so a size of 2 px means discs 2 px across whose centres are 1 px apart. When the law
+asks for more surfels than the set has, the whole set is drawn with its own spacing (larger discs).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from paramlod.device import cl_device
+from paramlod.programs import kernel
+
+from .errors import SurfelError
+from .format import SurfelSet, load_surfels
+
+LOCAL = 64
+COUNTERS = ("surfels_drawn", "atomics", "pixels_covered", "surfels_not_finite")
+
+
+@dataclass
+class FixedSize:
+    """Surfels of ``size_px`` pixels at the object's distance (the default strategy)."""
+    size_px: float = 2.0
+
+    def __post_init__(self):
+        if not (np.isfinite(self.size_px) and 0.1 <= self.size_px <= 256):
+            raise SurfelError(f"surfel size must be between 0.1 and 256 pixels, got {self.size_px}")
+
+    def size(self) -> float:
+        return float(self.size_px)
+
+    def observe(self, elapsed_ms: float):
+        pass
+
+
+@dataclass
+class FixedCount:
+    """Always the first ``count`` surfels, each disc sized to the prefix spacing."""
+    count: int
+
+    def __post_init__(self):
+        if int(self.count) != self.count or self.count <= 0:
+            raise SurfelError(f"surfel count must be a positive integer, got {self.count!r}")
+
+    def observe(self, elapsed_ms: float):
+        pass
+
+
+@dataclass
+class FrameTimeAdaptive:
+    """Surfel size steered by the last frame's time: factor = elapsed / target; outside [0.9, 1.1]
+    the size moves to (3 size + size factor) / 4, clamped to [min_size_px, max_size_px].
+
+    ``draw_surfels`` reports its own draw time through ``observe``; an application that measures
+    whole frames sets ``external=True`` and calls ``observe(frame_ms)`` itself."""
+    target_ms: float = 16.7
+    size_px: float = 2.0
+    min_size_px: float = 1.0
+    max_size_px: float = 32.0
+    external: bool = False
+
+    def __post_init__(self):
+        if not (self.target_ms > 0 and np.isfinite(self.target_ms)):
+            raise SurfelError(f"target frame time must be positive, got {self.target_ms}")
+        if not 0 < self.min_size_px <= self.size_px <= self.max_size_px:
+            raise SurfelError(f"need 0 < min_size_px <= size_px <= max_size_px, got "
+                              f"{self.min_size_px}, {self.size_px}, {self.max_size_px}")
+
+    def size(self) -> float:
+        return float(self.size_px)
+
+    def update(self, elapsed_ms: float) -> float:
+        factor = float(elapsed_ms) / self.target_ms
+        if factor < 0.9 or factor > 1.1:
+            s = (3.0 * self.size_px + self.size_px * factor) / 4.0
+            self.size_px = float(min(max(s, self.min_size_px), self.max_size_px))
+        return self.size_px
+
+    def observe(self, elapsed_ms: float, external: bool = False):
+        if external or not self.external:
+            self.update(elapsed_ms)
+
+
+def pixel_world_size(camera, depth: float) -> float:
+    """World size of one pixel (vertically) at view depth ``depth``."""
+    p = camera.projection
+    w = -p[3, 2] * depth + p[3, 3]          # clip w of a point at that depth (z = -depth)
+    return float(2.0 * w / (p[1, 1] * camera.height))
+
+
+def object_depth(camera, surfels: SurfelSet, transform) -> float:
+    """View depth of the nearest point of the object's bounding sphere (at least the near plane)."""
+    c, r = surfels.bounding_sphere()
+    m = camera.view @ transform
+    cv = m[:3, :3] @ c + m[:3, 3]
+    s = _scale(transform)
+    return float(max(-cv[2] - r * s, camera.near))
+
+
+def _scale(transform) -> float:
+    return float(abs(np.linalg.det(transform[:3, :3])) ** (1.0 / 3.0))
+
+
+def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None) -> dict:
+    """The prefix length and disc radius (object units) a strategy asks for."""
+    strategy = strategy or FixedSize()
+    transform = np.eye(4) if transform is None else np.asarray(transform, np.float64)
+    N = len(surfels)
+    if isinstance(strategy, FixedCount):
+        n = min(int(strategy.count), N)
+        r = surfels.spacing(n)
+        return {"prefix": n, "radius": r, "size_px": None, "saturated": strategy.count > N}
+    size = strategy.size()
+    depth = object_depth(camera, surfels, transform)
+    r_world = size * pixel_world_size(camera, depth) / 2.0
+    r = r_world / _scale(transform)          # object units
+    n = surfels.prefix_for_spacing(r)
+    saturated = surfels.packing / (r * r) > N
+    return {"prefix": n, "radius": max(r, surfels.spacing(n)) if saturated else r, "size_px": size,
+            "saturated": bool(saturated), "distance": depth}
+
+
+class _DeviceSurfels:
+    def __init__(self, s: SurfelSet):
+        import pyopencl as cl
+
+        from .sources import srgb_to_linear
+
+        n = len(s)
+        pos = np.zeros((n, 4), np.float32)
+        pos[:, :3] = s.positions
+        nrm = np.zeros((n, 4), np.float32)
+        nrm[:, :3] = s.normals
+        alb = np.zeros((n, 4), np.float32)
+        alb[:, :3] = srgb_to_linear(s.colors[:, :3] / 255.0)
+        alb[:, 3] = s.colors[:, 3] / 255.0
+        ctx = cl_device().context
+        mf = cl.mem_flags
+        self.host = (pos, nrm, alb)
+        self.bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in self.host]
+
+
+def draw_records(camera, transform):
+    """(xf: model-view rows + normal-matrix rows, float32 (24,); inverse projection, float32 (16,))."""
+    mv = camera.view @ transform
+    nm = np.linalg.inv(mv[:3, :3]).T
+    xf = np.zeros(24, np.float32)
+    xf[:12] = mv[:3, :].reshape(-1)
+    xf[12:24] = np.hstack([nm, np.zeros((3, 1))]).reshape(-1)
+    return xf, np.linalg.inv(camera.projection).astype(np.float32).reshape(-1)
+
+
+def draw_surfels(keys, camera, surfels, strategy=None, transform=None, object_id: int = 1,
+                 specular: float = 0.25, light=None) -> dict:
+    """Splat the prefix that ``strategy`` (default: FixedSize(2)) asks for into ``keys`` (a cleared
+    or partly drawn paramlod.framebuffer.KeyBuffer); returns stats. The caller resolves."""
+    import pyopencl as cl
+
+    from paramlod.render import LIGHT, camera_record
+
+    surfels = load_surfels(surfels)
+    if (keys.width, keys.height) != tuple(camera.size):
+        raise SurfelError(f"the key buffer is {keys.width}x{keys.height} but the camera is "
+                          f"{camera.size[0]}x{camera.size[1]}")
+    if not 0 <= int(object_id) <= 0xFFF:
+        raise SurfelError(f"object_id must be in 0..4095 (12 bits of the aux key), got {object_id}")
+    transform = np.eye(4) if transform is None else np.asarray(transform, np.float64)
+    if transform.shape != (4, 4) or not np.all(np.isfinite(transform)) or abs(np.linalg.det(transform[:3, :3])) < 1e-12:
+        raise SurfelError("surfel transform must be a finite, invertible 4x4 matrix")
+    strategy = strategy or FixedSize()
+    choice = choose_prefix(surfels, camera, strategy, transform)
+    dev = surfels.__dict__.get("_device")
+    if dev is None:
+        dev = surfels.__dict__["_device"] = _DeviceSurfels(surfels)
+    q = cl_device().queue
+    ctx = cl_device().context
+    xf, inv_proj = draw_records(camera, transform)
+    mf = cl.mem_flags
+    small = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in
+             (xf, camera_record(camera), inv_proj, np.asarray(LIGHT if light is None else light, np.float32))]
+    counters = np.zeros(len(COUNTERS), np.uint64)
+    cbuf = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=counters)
+    n = choice["prefix"]
+    radius_view = np.float32(choice["radius"] * _scale(transform))
+    t0 = time.perf_counter()
+    kernel("surfels_splat", ["keys.cl", "surfels_splat.cl"])(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view,
+                  *small, np.float32(specular), np.uint32(object_id), keys.color, keys.aux, cbuf)
+    cl.enqueue_copy(q, counters, cbuf)
+    q.finish()
+    ms = (time.perf_counter() - t0) * 1e3
+    strategy.observe(ms)
+    stats = {**choice, "radius_view": float(radius_view), "surfels": len(surfels), "ms": ms,
+             **{k: int(v) for k, v in zip(COUNTERS, counters)}}
+    return stats
+
+
+def _round_up(n, m):
+    return max(m, (n + m - 1) // m * m)
+
+
+def default_camera(surfels: SurfelSet, size=(512, 512), fov_y: float = 35.0, direction=(1.0, 0.6, 1.4)):
+    """A perspective camera that frames the set's bounding sphere from ``direction``."""
+    from paramlod.camera import Camera
+
+    c, r = surfels.bounding_sphere()
+    d = np.asarray(direction, np.float64)
+    d /= np.linalg.norm(d)
+    w, h = size
+    half = np.radians(fov_y) / 2
+    fit = min(np.tan(half), np.tan(half) * w / h)
+    dist = 1.1 * r / np.sin(np.arctan(fit))
+    return Camera.look_at(c + d * dist, c, up=(0, 1, 0), fov_y=fov_y, size=size,
+                          near=max(dist - 2 * r, dist * 1e-3), far=dist + 2 * r)
+
+
+def render_surfels(path_or_set, camera=None, strategy=None, size=(512, 512), transform=None,
+                   background=(0.12, 0.12, 0.14)):
+    """Render one surfel set alone: -> paramlod.Frame (stats in frame.stats)."""
+    from paramlod.framebuffer import KeyBuffer
+
+    surfels = load_surfels(path_or_set)
+    camera = camera or default_camera(surfels, size)
+    t0 = time.perf_counter()
+    keys = KeyBuffer(*camera.size)
+    keys.clear()
+    stats = draw_surfels(keys, camera, surfels, strategy, transform)
+    frame = keys.resolve()
+    frame.background = tuple(background)
+    frame.stats = {"device": cl_device().name, "variant": "surfels", "size": list(camera.size),
+                   "surfels": stats, "pixels_written": int(np.count_nonzero(np.isfinite(frame.depth))),
+                   "ms": {"render": stats["ms"], "total": (time.perf_counter() - t0) * 1e3}}
+    return frame

@@ -1,0 +1,206 @@
+"""Direct point renderer: adaptive sampling options (measure, oversampling, step shrink), their
+exact sample-count twin, hole statistics, and no holes with the defaults."""
+import warnings
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+import paramlod as pl
+from paramlod.device import cl_device
+from paramlod.framebuffer import KeyBuffer
+from paramlod.frame import Frame
+from paramlod.points import DirectPointRenderer, PointSettings, count_holes, grid_counts, side_counts
+from paramlod.registry import get_function
+from paramlod.render import RenderSettings, renderer_for
+
+# the shapes of the no-holes tests: (function, transform); the heart is Johi's heart
+SHAPES = {
+    "sphere": ("sphere", pl.rotate(30, (1, 0, 0))),
+    "torus": ("torus", pl.rotate(60, (1, 0, 0))),
+    "heart": ("johis_heart", pl.rotate(-20, (0, 1, 0))),
+}
+DISTANCES = (2.4, 4.0, 9.0)
+SIZE = (112, 112)
+
+
+def camera_at(dist, size=SIZE):
+    return pl.Camera.look_at((0.25 * dist, 0.2 * dist, dist), (0, 0, 0), size=size)
+
+
+@lru_cache(maxsize=None)
+def _dense_world(name, n=1400):
+    fn, m = SHAPES[name]
+    f = get_function(fn)
+    u = np.linspace(*f.u_range, n)
+    v = np.linspace(*f.v_range, n)
+    uu, vv = np.meshgrid(u, v)
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")
+        p = f.evaluate(uu, vv).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    return (np.concatenate([p, np.ones((len(p), 1))], axis=1) @ m.T)
+
+
+def dense_silhouette(name, cam):
+    """Silhouette and per-pixel front depth of SHAPES[name] from a dense numpy sampling (about
+    10 samples per pixel side at the sizes used here), and the 3x3-neighbourhood maximum of that
+    depth (a drawn sample may lie anywhere in its pixel)."""
+    w, h = cam.size
+    pw = _dense_world(name)
+    e = pw @ cam.view.T
+    c = e @ cam.projection.T
+    x = (c[:, 0] / c[:, 3] * 0.5 + 0.5) * w
+    y = (0.5 - c[:, 1] / c[:, 3] * 0.5) * h
+    ok = (x >= 0) & (y >= 0) & (x < w) & (y < h) & (-e[:, 2] > cam.near)
+    pix = y[ok].astype(np.int64) * w + x[ok].astype(np.int64)
+    depth = np.full(w * h, np.inf)
+    np.minimum.at(depth, pix, -e[ok, 2])
+    depth = depth.reshape(h, w)
+    mask = np.isfinite(depth)
+    d = np.where(mask, depth, -np.inf)
+    p = np.pad(d, 1, constant_values=-np.inf)
+    dmax = np.max([p[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)], axis=0)
+    return mask, dmax
+
+
+def shape_scene(name):
+    fn, m = SHAPES[name]
+    s = pl.Scene()
+    s.add(fn, transform=m)
+    return s
+
+
+# ---------------------------------------------------------------- sample counts and the record hook
+
+def test_factor_and_side_counts_twin():
+    d = PointSettings()
+    assert d.factor() == np.float32(d.density)   # the defaults keep the foundation's counts
+    ext = np.array([0, 0.2, 1, 7.5, 40, 1e9, np.inf, np.nan], np.float32)
+    n = side_counts(ext, d)
+    assert n.tolist() == [2, 2, 3, 13, 61, 1024, 1024, 1024]
+    s = PointSettings(sampling="extent", oversample=2.0, epsilon=0.2)
+    assert s.factor() == np.float32(1.5 * 2.0 / 0.8)
+    assert side_counts(np.float32([10]), s).tolist() == [int(np.ceil(np.float32(10) * s.factor())) + 1]
+    # grid_counts picks e (extent) or s (segment) columns
+    rl = np.zeros(1, [("ext", "<f4", 4)])
+    rl["ext"] = [[10, 20, 30, 40]]
+    assert [a.tolist() for a in grid_counts(rl, s)] == [side_counts(np.float32([10]), s).tolist(),
+                                                         side_counts(np.float32([20]), s).tolist()]
+    assert [a.tolist() for a in grid_counts(rl, d)] == [[46], [61]]
+
+
+@pytest.mark.parametrize("settings", [
+    PointSettings(sampling="extent"),
+    PointSettings(sampling="extent", oversample=2.0, epsilon=0.25),
+    PointSettings(oversample=1.5, density=1.0),
+], ids=["extent", "extent-os2-eps", "segment-os1.5"])
+def test_key_buffer_equals_minimum_at_with_adaptive_options(settings):
+    import pyopencl.array as cla
+
+    scene = pl.Scene()
+    scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
+    scene.add("torus", transform=pl.translate(0.8, 0.2, 0.3) @ pl.rotate(70, (1, 0, 0)))
+    cam = pl.Camera.look_at((0.5, 0.8, 3.5), (0.3, 0, 0), size=(80, 64))
+    r = renderer_for(scene)
+    dev = r.upload(scene, cam)
+    rs = RenderSettings()
+    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["count"], dev["domains"], dev["cam"], rs.lod)
+    nu, nv = grid_counts(r.lod.read_render_list(n), settings)
+    counts = nu * nv
+    total = int(counts.sum())
+    q = cl_device().queue
+    rec = DirectPointRenderer(scene.functions(), record=True)
+    off = cla.to_device(q, np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32))
+    pix = cla.empty(q, total, np.uint32)
+    key = cla.empty(q, total, np.uint64)
+    keys = KeyBuffer(*cam.size)
+    keys.clear()
+    stats = rec.draw(rbuf, n, dev["inst"], dev["materials"], dev["cam"], dev["light"], keys, settings,
+                     record_args=(off.data, pix.data, key.data))
+    color, _ = keys.read_keys()
+    pix, key = pix.get(), key.get()
+    assert stats["samples"] == total
+    kept = pix != 0xFFFFFFFF
+    expect = np.full(cam.size[0] * cam.size[1], np.iinfo(np.uint64).max, np.uint64)
+    np.minimum.at(expect, pix[kept], key[kept])
+    np.testing.assert_array_equal(color.reshape(-1), expect)
+    assert 0 < stats["atomics"] <= kept.sum()
+
+
+# ---------------------------------------------------------------- the trade-off, measured
+
+def _render(scene, cam, **opts):
+    return pl.render(scene, cam, settings=RenderSettings(points=PointSettings(**opts)))
+
+
+def test_adaptive_sampling_trades_samples_for_holes():
+    scene = shape_scene("torus")
+    cam = camera_at(2.4)
+    mask, dmax = dense_silhouette("torus", cam)
+    tol = 0.02 * 2.4
+    base = _render(scene, cam)
+    ext = _render(scene, cam, sampling="extent", density=1.0)
+    ext_fixed = _render(scene, cam, sampling="extent", density=1.0, oversample=2.0)
+    shrink = _render(scene, cam, sampling="extent", density=1.0, epsilon=0.5)
+    s = {k: f.stats["samples"] for k, f in
+         (("base", base), ("ext", ext), ("ext_fixed", ext_fixed), ("shrink", shrink))}
+    holes = {k: count_holes(f, mask, dmax, tol) for k, f in
+             (("base", base), ("ext", ext), ("ext_fixed", ext_fixed), ("shrink", shrink))}
+    # extents (sum of a line's segments) <= 7 x the longest segment: fewer samples
+    assert s["ext"] < 0.6 * s["base"]
+    # the fixed factor and the step shrink multiply samples per side by about 2
+    assert 3.0 < s["ext_fixed"] / s["ext"] < 4.6
+    assert 3.0 < s["shrink"] / s["ext"] < 4.6
+    # one sample per measured pixel leaves many 1-pixel holes; either remedy removes most
+    assert holes["base"] == 0
+    assert holes["ext"] > 100
+    assert holes["ext_fixed"] < holes["ext"] / 10 and holes["shrink"] < holes["ext"] / 10
+    # overdraw: atomics per written pixel, higher with more samples
+    assert ext_fixed.stats["overdraw"] > ext.stats["overdraw"] >= 1.0
+
+
+def test_count_holes_counts_gaps_inside_the_eroded_silhouette():
+    h, w = 20, 30
+    depth = np.full((h, w), np.inf, np.float32)
+    depth[4:16, 5:25] = 2.0
+    frame = Frame(color=np.zeros((h, w, 4), np.float32), depth=depth.copy(),
+                  normal=np.zeros((h, w, 3), np.float32), object_id=np.zeros((h, w), np.uint32))
+    mask = np.isfinite(depth)
+    assert count_holes(frame, mask) == 0
+    frame.depth[8, 10] = np.inf            # a 1-pixel hole inside
+    frame.depth[4, 12] = np.inf            # on the silhouette's edge row: not a hole after erosion
+    assert count_holes(frame, mask) == 1
+    assert count_holes(frame, mask, erode=0) == 2
+    frame.depth[9, 11] = 3.0                # a surface behind shows through
+    assert count_holes(frame, mask) == 1
+    assert count_holes(frame, mask, depth=np.full((h, w), 2.0), tol=0.5) == 2
+    with pytest.raises(pl.SceneError, match="mask shape"):
+        count_holes(frame, mask[:5])
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"sampling": "threshold"}, "sampling"),
+    ({"oversample": 0.5}, "oversample"),
+    ({"epsilon": 1.0}, "epsilon"),
+    ({"density": 0.0}, "density"),
+])
+def test_bad_point_settings_name_the_option(bad, match):
+    scene = shape_scene("sphere")
+    with pytest.raises(pl.SceneError, match=match):
+        _render(scene, camera_at(4.0, size=(32, 32)), **bad)
+
+
+# ---------------------------------------------------------------- no holes with the defaults
+
+@pytest.mark.parametrize("dist", DISTANCES)
+@pytest.mark.parametrize("name", list(SHAPES))
+def test_direct_defaults_leave_no_holes(name, dist):
+    cam = camera_at(dist)
+    frame = pl.render(shape_scene(name), cam)
+    mask, dmax = dense_silhouette(name, cam)
+    assert mask.sum() > 150
+    holes = count_holes(frame, mask, dmax, tol=0.02 * dist)
+    assert holes == 0, f"{holes} holes in {name} at distance {dist}"
+    # the drawn silhouette matches the dense one (only edge pixels may differ)
+    assert np.count_nonzero(frame.coverage & ~mask) <= 0.08 * mask.sum()
