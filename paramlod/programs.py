@@ -13,11 +13,19 @@ from .errors import FunctionError
 _cache: dict[tuple, object] = {}
 
 
-def _context_lines(src: str, log: str, around: int = 3) -> str:
+CL_LINE = r":(\d+):\d+:"              # clang-style 'file:LINE:COL:'
+GLSL_LINE = r"\b0[:(](\d+)[(:)]"        # Mesa '0:LINE(COL)', NVIDIA '0(LINE)'
+
+
+def context_lines(src: str, log: str, pattern: str = CL_LINE, around: int = 3) -> str:
+    """The generated lines (up to three places) that a compiler ``log`` complains about."""
     lines = src.splitlines()
-    shown = []
-    for m in re.finditer(r":(\d+):(\d+):", log):
+    shown, seen = [], set()
+    for m in re.finditer(pattern, log):
         ln = int(m.group(1))
+        if ln in seen or not 1 <= ln <= len(lines):
+            continue
+        seen.add(ln)
         lo, hi = max(1, ln - around), min(len(lines), ln + around)
         shown.append("\n".join(f"{'>' if i == ln else ' '}{i:5d} | {lines[i - 1]}" for i in range(lo, hi + 1)))
         if len(shown) >= 3:
@@ -43,7 +51,7 @@ def build(files: list[str], functions=(), defines: dict | None = None):
             names = ", ".join(f"'{f.name}' ({f.source})" for f in functions) or "none"
             raise FunctionError(
                 f"the generated OpenCL code does not compile (functions: {names}).\n"
-                f"{_context_lines(src, log)}\ncompiler said:\n{log[-2000:]}") from None
+                f"{context_lines(src, log)}\ncompiler said:\n{log[-2000:]}") from None
         _cache[key] = prog
     return prog
 

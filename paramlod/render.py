@@ -164,7 +164,8 @@ def render(scene: Scene, camera: Camera, variant: str = "points", settings: Rend
         from .tess import render_tess
 
         if not scene.surfels:
-            return render_tess(scene, camera, settings.tess, settings.lod, lod_stage=renderer_for(scene).lod)
+            r = renderer_for(scene)
+            return render_tess(scene, camera, settings.tess, settings.lod, lod_stage=r.lod, uploader=r.upload)
         # surfels are points: draw them with the point path and composite by depth
         from .composite import composite, subscene
 
@@ -172,6 +173,7 @@ def render(scene: Scene, camera: Camera, variant: str = "points", settings: Rend
         if scene.objects:
             parametric = subscene(scene, scene.objects)
             frames.insert(0, render_tess(parametric, camera, settings.tess, settings.lod,
-                                         lod_stage=renderer_for(parametric).lod))
+                                         lod_stage=renderer_for(parametric).lod,
+                                         uploader=renderer_for(parametric).upload))
         return composite(frames, background=scene.background)
     return renderer_for(scene).render(scene, camera, settings, variant)

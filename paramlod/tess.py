@@ -35,6 +35,7 @@ from .device import gl_context
 from .errors import DeviceError, FunctionError, SceneError
 from .frame import Frame
 from .patches import RENDER_DTYPE
+from .programs import GLSL_LINE, context_lines
 from .scene import Scene
 
 # Highest tessellation level allowed: GL_MAX_TESS_GEN_LEVEL is at least 64 on every GL 4.x device.
@@ -169,22 +170,6 @@ class TessSettings:
 
 
 # --- shader programs ----------------------------------------------------------------------------
-def _context_lines(src: str, log: str, around: int = 3) -> str:
-    """The generated GLSL lines the compiler complains about (Mesa '0:LINE(COL)', NVIDIA '0(LINE)')."""
-    lines = src.splitlines()
-    shown, seen = [], set()
-    for m in re.finditer(r"\b0[:(](\d+)[(:)]", log):
-        ln = int(m.group(1))
-        if ln in seen or not 1 <= ln <= len(lines):
-            continue
-        seen.add(ln)
-        lo, hi = max(1, ln - around), min(len(lines), ln + around)
-        shown.append("\n".join(f"{'>' if i == ln else ' '}{i:5d} | {lines[i - 1]}" for i in range(lo, hi + 1)))
-        if len(shown) >= 3:
-            break
-    return "\n...\n".join(shown)
-
-
 def _stage(defines: dict, body: list[str]) -> str:
     head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
     return head + "\n".join([kernels.source("tess_common.glsl"), *body])
@@ -199,7 +184,7 @@ def _program(ctx, stages: dict, functions) -> object:
         log = str(exc)
         # find the stage the log is about, to show its lines
         stage = next((k for k in stages if k in log), None)   # moderngl names the stage
-        shown = _context_lines(stages[stage], log) if stage else ""
+        shown = context_lines(stages[stage], log, GLSL_LINE) if stage else ""
         names = ", ".join(f"'{f.name}' ({f.source})" for f in functions) or "none"
         raise FunctionError(
             f"the generated GLSL does not compile (functions: {names}"
@@ -212,11 +197,13 @@ _programs: dict[tuple, object] = {}
 def build_programs(ctx, functions, spacing: str):
     """(tessellation program, resolve programs by multisampling) for ``functions``, cached."""
     functions = list(functions)
-    gen_pos = glsl_dispatch_source(functions, position=True, surface=False)
-    gen_surf = glsl_dispatch_source(functions, position=False, surface=True)
-    key = (id(ctx), gen_pos, gen_surf, spacing)
+    # keyed by the function objects: generating the GLSL again just to look it up cost ~150 ms a
+    # frame for an order-12 SH glyph
+    key = (id(ctx), tuple(id(f) for f in functions), spacing)
     progs = _programs.get(key)
     if progs is None:
+        gen_pos = glsl_dispatch_source(functions, position=True, surface=False)
+        gen_surf = glsl_dispatch_source(functions, position=False, surface=True)
         tess_defs = {"PL_SPACING": SPACINGS[spacing]}
         stages = {
             "vertex_shader": _stage(tess_defs, [kernels.source("tess_vertex.glsl")]),
@@ -441,10 +428,13 @@ class TessRenderer:
 
         # CL -> GL through host memory: the render list records go into the vertex buffer
         self._patches.write(np.ascontiguousarray(render_list[:n]).tobytes())
-        self._params.write(params.tobytes())
-        self._inst_f.write(inst_f.tobytes())
-        self._inst_u.write(inst_u.tobytes())
-        self._materials.write(scene.materials().tobytes())
+        scene_key = (id(scene), scene._version, scene.time)
+        if scene_key != getattr(self, "_scene_key", None):   # instance data only when it changed
+            self._params.write(params.tobytes())
+            self._inst_f.write(inst_f.tobytes())
+            self._inst_u.write(inst_u.tobytes())
+            self._materials.write(scene.materials().tobytes())
+            self._scene_key = scene_key
         self._counters.write(np.zeros(4, np.uint32).tobytes())
         t2 = time.perf_counter()
 
@@ -508,12 +498,11 @@ class TessRenderer:
         if device_samples != aa.msaa:
             notes.append(f"the device allocated {device_samples} samples per pixel for a {aa.msaa}-sample "
                          "request; coverage and the depth/id resolve use all of them")
-        t5 = time.perf_counter()
-
         frame = Frame(color=np.ascontiguousarray(color), depth=np.ascontiguousarray(depth),
                       normal=np.ascontiguousarray(normal), object_id=np.ascontiguousarray(ids))
         frame.background = scene.background
         written = int(np.count_nonzero(np.isfinite(depth)))
+        t5 = time.perf_counter()   # readback: textures to host arrays, flipped to row 0 = top
         frame.stats = {
             "device": ctx.info.get("GL_RENDERER"),
             "variant": "tess",
@@ -569,10 +558,12 @@ def _pipeline_for(scene: Scene) -> _Pipeline:
 
 
 def render_tess(scene: Scene, camera: Camera, settings: TessSettings | None = None, lod_settings=None,
-                lod_stage=None) -> Frame:
+                lod_stage=None, uploader=None) -> Frame:
     """One frame with the tessellation variant: instance buffers -> LOD stage (thresholds divided
     by ``lod_divisor`` of the effective AA mode) -> render list to host -> tessellation -> Frame.
 
+    ``uploader``: a function (scene, camera) -> device buffers, such as ``Renderer.upload``, that
+    caches the instance buffers between frames.
     ``lod_stage``: a LodStage built for ``scene.functions()`` to use (for example the one of
     ``paramlod.render.Renderer``); by default one is built and kept per set of functions."""
     import pyopencl.array as cla
@@ -597,12 +588,17 @@ def render_tess(scene: Scene, camera: Camera, settings: TessSettings | None = No
         lod_stage = pipe.lod
     _, aa, _ = pipe.tess.effective_aa(settings.aa)
     div = aa.divisor
-    q = cl_device().queue
-    inst_f, inst_u, params = scene.instance_buffers()
-    inst = tuple(cla.to_device(q, a).data for a in (inst_f, inst_u, params))
-    cam = cla.to_device(q, camera_record(camera)).data
+    if uploader is not None:   # the point Renderer's upload: instance buffers sent once per scene change
+        dev = uploader(scene, camera)
+        inst, count, domains, cam = dev["inst"], dev["count"], dev["domains"], dev["cam"]
+    else:
+        q = cl_device().queue
+        inst_f, inst_u, params = scene.instance_buffers()
+        inst = tuple(cla.to_device(q, a).data for a in (inst_f, inst_u, params))
+        count, domains = len(inst_f), inst_f[:, 28:32]
+        cam = cla.to_device(q, camera_record(camera)).data
     t1 = time.perf_counter()
-    _, n, steps, lod_ms = lod_stage.run(inst, len(inst_f), inst_f[:, 28:32], cam, lod_settings, t_div=div)
+    _, n, steps, lod_ms = lod_stage.run(inst, count, domains, cam, lod_settings, t_div=div)
     t2 = time.perf_counter()
     records = lod_stage.read_render_list(n)
     t3 = time.perf_counter()
@@ -653,7 +649,7 @@ def glsl_surface(fn, u, v, block=None, **params):
             prog = ctx.program(vertex_shader=src, varyings=["out_pos", "out_du", "out_dv"])
         except moderngl.Error as exc:
             raise FunctionError(f"the generated GLSL of '{fn.name}' ({fn.source}) does not compile.\n"
-                                f"{_context_lines(src, str(exc))}\ncompiler said:\n{str(exc)[-2000:]}") from None
+                                f"{context_lines(src, str(exc), GLSL_LINE)}\ncompiler said:\n{str(exc)[-2000:]}") from None
         _probes[key] = prog
     n = len(uv)
     if n == 0:
