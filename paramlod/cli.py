@@ -132,6 +132,10 @@ def build_parser() -> argparse.ArgumentParser:
     from paramlod.surfels.cli import add_subparser as surfels_subparser
 
     surfels_subparser(sub)
+
+    from .dmri import add_subparser as glyphs_subparser
+
+    glyphs_subparser(sub)
     return p
 
 

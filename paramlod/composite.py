@@ -117,7 +117,7 @@ def subscene(scene, objects, surfels=()):
             raise SceneError("subscene: an object does not belong to the scene")
     sub.objects = list(objects)
     sub.surfels = list(surfels)
-    sub._version += 1
+    sub.touch()
     return sub
 
 

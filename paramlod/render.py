@@ -48,14 +48,16 @@ class Renderer:
         self.ssaa: LocalFramebufferRenderer | None = None   # built on first use
         self.keys: KeyBuffer | None = None
         self._scene_key, self._scene_dev = None, None
+        self._cam_buf = None   # the camera record, rewritten every frame
 
     def upload(self, scene: Scene, camera: Camera):
         """Device copies of the scene's buffers (re-sent only when the scene or its time changed)
         and of this frame's camera."""
+        import pyopencl as cl
         import pyopencl.array as cla
 
         q = cl_device().queue
-        key = (id(scene), scene._version, scene.time)
+        key = (scene._version, scene.time)
         if key != self._scene_key and self.lod is None:
             self._scene_dev = {"light": cla.to_device(q, LIGHT).data}
             self._scene_key = key
@@ -69,7 +71,10 @@ class Renderer:
                 "count": len(inst_f),
             }
             self._scene_key = key
-        dev = dict(self._scene_dev, cam=cla.to_device(q, camera_record(camera)).data)
+        if self._cam_buf is None:
+            self._cam_buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, 36 * 4)
+        cl.enqueue_copy(q, self._cam_buf, camera_record(camera))
+        dev = dict(self._scene_dev, cam=self._cam_buf)
         if self.keys is None or (self.keys.width, self.keys.height) != camera.size:
             self.keys = KeyBuffer(*camera.size)
         return dev

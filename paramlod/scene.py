@@ -8,6 +8,7 @@ the parent's surface frame, recomputed for the scene's ``time``.
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +25,7 @@ INST_FLOATS = 32
 INST_UINTS = 4
 MAX_OBJECTS = 4095   # object ids are carried in 12 bits of the aux key (docs/frame.md)
 MAX_PART_DEPTH = 4
+_versions = itertools.count(1)
 
 
 @dataclass
@@ -86,12 +88,16 @@ def _blocks(fn: ParametricFunction, shared: dict, per_instance: dict, count: int
 
 
 class Scene:
+    """Objects to render. Renderers keep the scene's buffers on the device between frames and send
+    them again when objects are added or ``time`` changes; after changing an object in place (its
+    transform, params, ...), call ``touch()``."""
+
     def __init__(self, background=(0.12, 0.12, 0.14), time: float = 0.0):
         self.objects: list[SceneObject] = []
         self.surfels: list[SurfelObject] = []
         self.background = tuple(float(x) for x in background)
         self.time = float(time)
-        self._version = 0
+        self._version = next(_versions)
         self._cache = None
 
     def add(self, fn_or_name, params: dict | None = None, transform=None, material: Material | None = None) -> SceneObject:
@@ -146,8 +152,13 @@ class Scene:
         obj = SceneObject(fn, params, m, material or Material(), self.object_count + 1, count, per, transforms,
                           colors)
         self.objects.append(obj)
-        self._version += 1
+        self.touch()
         return obj
+
+    def touch(self) -> None:
+        """Mark the scene as changed: renderers upload its buffers again on the next frame.
+        (Versions are unique across scenes, so a renderer never mistakes one scene for another.)"""
+        self._version = next(_versions)
 
     def add_surfels(self, path_or_set, transform=None, strategy=None, specular: float = 0.25) -> SurfelObject:
         """Add a ``.surfels`` file or SurfelSet; ``strategy`` picks the prefix each frame
@@ -160,6 +171,7 @@ class Scene:
         m = np.eye(4) if transform is None else _as_matrix(transform)
         obj = SurfelObject(load_surfels(path_or_set), m, strategy or FixedSize(), self.object_count + 1, specular)
         self.surfels.append(obj)
+        self.touch()
         return obj
 
     @property

@@ -428,7 +428,7 @@ class TessRenderer:
 
         # CL -> GL through host memory: the render list records go into the vertex buffer
         self._patches.write(np.ascontiguousarray(render_list[:n]).tobytes())
-        scene_key = (id(scene), scene._version, scene.time)
+        scene_key = (scene._version, scene.time)
         if scene_key != getattr(self, "_scene_key", None):   # instance data only when it changed
             self._params.write(params.tobytes())
             self._inst_f.write(inst_f.tobytes())

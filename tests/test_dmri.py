@@ -378,3 +378,18 @@ def test_to_scene_without_the_glyph_function_says_so(monkeypatch, csa):
     monkeypatch.setattr(reg, "get_function", missing)
     with pytest.raises(DmriError, match="needs the 'sh_glyph' parametric function"):
         csa.to_scene()
+
+
+def test_glyphs_command_renders_an_sh_volume_and_names_bad_files(tmp_path, capsys):
+    import importlib.resources
+
+    from paramlod.cli import main
+
+    coef = str(importlib.resources.files("dipy") / "data" / "files" / "func_coef.nii.gz")
+    out = tmp_path / "g.png"
+    assert main(["glyphs", coef, "--basis", "tournier07", "--legacy", "--size", "64x64", "-o", str(out)]) == 0
+    assert "24 glyphs of order 8" in capsys.readouterr().out and out.stat().st_size > 0
+    bad = tmp_path / "bad.nii.gz"
+    bad.write_bytes(b"not a nifti")
+    assert main(["glyphs", str(bad), "-o", str(tmp_path / "x.png")]) == 2
+    assert str(bad) in capsys.readouterr().err

@@ -142,3 +142,24 @@ def test_per_instance_colours():
     assert left[:, 0].mean() > 3 * left[:, 2].mean() and right[:, 2].mean() > 3 * right[:, 0].mean()
     with pytest.raises(pl.SceneError, match=r"colors must be a \[2, 3\] array"):
         s.add_instances("sphere", 2, colors=[[2, 0, 0], [0, 0, 1]])
+
+
+def test_a_new_scene_never_reuses_an_old_scenes_buffers():
+    cam = pl.Camera.look_at((0, 0, 6), (0, 0, 0), size=(96, 64))
+    for x in (-1.5, 1.5, -1.5):
+        s = pl.Scene()
+        s.add("sphere", transform=pl.translate(x, 0, 0))
+        f = pl.render(s, cam)
+        xs = np.nonzero(f.coverage)[1]
+        assert (xs.mean() < 48) == (x < 0)
+        del s, f
+
+
+def test_touch_after_changing_an_object_in_place():
+    s = pl.Scene()
+    obj = s.add("sphere")
+    cam = pl.Camera.look_at((0, 0, 6), (0, 0, 0), size=(96, 64))
+    before = pl.render(s, cam).coverage.sum()
+    obj.transform = pl.scale(0.5)
+    s.touch()
+    assert pl.render(s, cam).coverage.sum() < 0.5 * before
