@@ -123,3 +123,22 @@ def test_nan_samples_are_dropped_and_counted():
     assert cov.sum() > 500
     # only the defined half (x >= 0, right half of the image) is drawn
     assert xs.min() >= 96 // 2 - 2
+
+
+def test_srgb_encoding_table_rounds_the_srgb_curve():
+    """keys.cl encodes colour by searching SRGB8_THRESHOLDS; the table must give the code that
+    rounding the exact sRGB curve gives (checked away from the code boundaries)."""
+    import re
+
+    from paramlod import kernels
+
+    src = kernels.source("keys.cl")
+    body = src[src.index("SRGB8_THRESHOLDS[256] = {"):]
+    t = np.array([float(x) for x in re.findall(r"-?\d+\.\d+(?:e-?\d+)?", body[:body.index("};")])])
+    assert len(t) == 256
+    x = np.random.default_rng(0).random(20_000)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    exact = np.floor(s * 255 + 0.5)
+    code = np.searchsorted(t, x, side="right") - 1
+    away = np.min(np.abs(x[:, None] - t[None, 1:]), axis=1) > 1e-6
+    np.testing.assert_array_equal(code[away], exact[away])

@@ -3,7 +3,6 @@
 Small images only: tessellation on llvmpipe is about 100x slower than on a GPU.
 """
 import math
-import os
 import warnings
 
 import numpy as np
@@ -12,7 +11,6 @@ import sympy as sp
 from conftest import iou, sphere_disc
 
 import paramlod as pl
-from paramlod.codegen_glsl import glsl_dispatch_source
 from paramlod.composite import composite, render_mixed, split_by_variant
 from paramlod.errors import FunctionError, SceneError
 from paramlod.frame import Frame
@@ -81,7 +79,6 @@ def test_bad_settings_are_named(kw, word):
 
 
 # --- generated GLSL -----------------------------------------------------------------------------
-_SLOW_GLSL = 40_000   # characters of generated GLSL above which llvmpipe needs tens of seconds
 
 
 def _builtin_names():
@@ -92,9 +89,6 @@ def _builtin_names():
 def test_glsl_matches_numpy(name):
     """The generated GLSL, run on the GL device, gives the numpy reference's f and partials."""
     fn = get_function(name)
-    if len(glsl_dispatch_source([fn], position=False)) > _SLOW_GLSL and not os.environ.get("PARAMLOD_SLOW_TESTS"):
-        pytest.skip(f"'{name}' generates a large shader that llvmpipe compiles for tens of seconds; "
-                    "set PARAMLOD_SLOW_TESTS=1 to include it")
     uu, vv = np.meshgrid(np.linspace(*fn.u_range, 13), np.linspace(*fn.v_range, 11))
     pos, du, dv = glsl_surface(fn, uu, vv)
     P, DU, DV = fn.surface(uu, vv)
