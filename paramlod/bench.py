@@ -129,16 +129,15 @@ def _device_buffers_mib(scene, size) -> float:
     return total / 2 ** 20
 
 
-def measure(scene, base, centre, dist, variant, aa, args, threshold, size):
+def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, size):
     from .programs import start_timing, stop_timing
     from .render import RenderSettings, render
 
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
+    rs.tess.l_max = l_max
     if aa:
         rs.tess.aa = aa
-        if aa != "noAA":
-            rs.tess.l_max = 64
     rows = []
     for k in range(args.warmup + args.frames):
         cam = _orbit(base, centre, dist, k, args.frames, size)
@@ -275,19 +274,19 @@ def run_bench(args) -> int:
                   flush=True)
         save()
     for name in names:
-        build, direction, up, threshold = SCENARIOS[name]
+        build, direction, up, threshold, l_max = SCENARIOS[name]
         scene = build()
         base = framing_camera(scene, direction, up, 40.0, size, margin=1.0)
         lo, hi = scene_box(scene)
         centre = (lo + hi) / 2
         per = result["scenarios"].setdefault(name, {"instances": scene.instance_count, "threshold": threshold,
-                                                     "variants": {}})
+                                                     "l_max": l_max, "variants": {}})
         for vname in args.variants:
             variant, aa = VARIANTS[vname]
             rows = per["variants"].setdefault(vname, [])
             for dist in args.distances:
                 try:
-                    r = measure(scene, base, centre, dist, variant, aa, args, threshold, size)
+                    r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, size)
                 except ParamlodError as exc:
                     r = {"distance": dist, "error": str(exc)}
                 rows.append(r)

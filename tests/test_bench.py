@@ -1,0 +1,23 @@
+"""`paramlod bench` runs end to end (tiny sizes) and writes what it promises; no speed is asserted."""
+import json
+
+from paramlod.cli import main
+
+
+def test_bench_writes_json_markdown_and_per_distance_rows(tmp_path):
+    assert main(["bench", "sphere", "--variants", "points", "--size", "64x48", "--distances", "0.6", "1.5",
+                 "--frames", "2", "--warmup", "1", "--extras", "ceilings", "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "results.json").read_text())
+    assert res["atomics_ceiling_per_s"] > 0
+    rows = res["scenarios"]["sphere"]["variants"]["points"]
+    assert [r["distance"] for r in rows] == [0.6, 1.5]
+    for r in rows:
+        assert r["frames"] == 2 and r["render_patches"] > 0 and r["pixels_written"] > 0
+        assert len(r["lod_steps_in"]) == 12 and r["lod_steps_in"][0] == 1
+    assert rows[0]["pixels_written"] > rows[1]["pixels_written"]      # nearer covers more
+    assert "| sphere | points | 0.6 |" in (tmp_path / "results.md").read_text()
+
+
+def test_bench_names_unknown_scenarios(tmp_path, capsys):
+    assert main(["bench", "teapot", "--out", str(tmp_path)]) == 2
+    assert "unknown scenario(s) teapot" in capsys.readouterr().err
