@@ -176,13 +176,19 @@ def conversion_matrix(order: int, source: str, legacy: bool = False) -> np.ndarr
     return K
 
 
-def to_canonical(coeffs, basis: str, legacy: bool = False) -> np.ndarray:
-    """Coefficients [..., n] in dipy's ``basis`` -> the canonical non-legacy descoteaux07."""
+def _sh_set(coeffs, basis: str) -> tuple[np.ndarray, int]:
+    """(coefficients as float64, their order), checking the basis name and the count."""
     _check_basis(basis)
     c = np.asarray(coeffs, dtype=np.float64)
     order = order_for_count(c.shape[-1])
     if order is None:
         raise DmriError(f"{c.shape[-1]} coefficients is not an even-order SH set; allowed: {_allowed_counts()}")
+    return c, order
+
+
+def to_canonical(coeffs, basis: str, legacy: bool = False) -> np.ndarray:
+    """Coefficients [..., n] in dipy's ``basis`` -> the canonical non-legacy descoteaux07."""
+    c, order = _sh_set(coeffs, basis)
     if basis == CANONICAL_BASIS and not legacy:
         return c.copy()
     return c @ conversion_matrix(order, basis, bool(legacy)).T
@@ -190,11 +196,7 @@ def to_canonical(coeffs, basis: str, legacy: bool = False) -> np.ndarray:
 
 def from_canonical(coeffs, basis: str, legacy: bool = False) -> np.ndarray:
     """Inverse of ``to_canonical``."""
-    _check_basis(basis)
-    c = np.asarray(coeffs, dtype=np.float64)
-    order = order_for_count(c.shape[-1])
-    if order is None:
-        raise DmriError(f"{c.shape[-1]} coefficients is not an even-order SH set; allowed: {_allowed_counts()}")
+    c, order = _sh_set(coeffs, basis)
     if basis == CANONICAL_BASIS and not legacy:
         return c.copy()
     return c @ np.linalg.inv(conversion_matrix(order, basis, bool(legacy))).T

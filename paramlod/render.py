@@ -46,9 +46,18 @@ class Renderer:
         self.lod = LodStage(self.functions) if self.functions else None
         self.points = DirectPointRenderer(self.functions, record=record) if self.functions else None
         self.ssaa: LocalFramebufferRenderer | None = None   # built on first use
+        self._tess = None
         self.keys: KeyBuffer | None = None
         self._scene_key, self._scene_dev = None, None
         self._cam_buf = None   # the camera record, rewritten every frame
+
+    def tess_renderer(self):
+        """The tessellation renderer for these functions (OpenGL), created on first use."""
+        if self._tess is None:
+            from .tess import TessRenderer
+
+            self._tess = TessRenderer(self.functions)
+        return self._tess
 
     def upload(self, scene: Scene, camera: Camera):
         """Device copies of the scene's buffers (re-sent only when the scene or its time changed)
@@ -169,16 +178,13 @@ def render(scene: Scene, camera: Camera, variant: str = "points", settings: Rend
         from .tess import render_tess
 
         if not scene.surfels:
-            r = renderer_for(scene)
-            return render_tess(scene, camera, settings.tess, settings.lod, lod_stage=r.lod, uploader=r.upload)
+            return render_tess(scene, camera, settings.tess, settings.lod)
         # surfels are points: draw them with the point path and composite by depth
         from .composite import composite, subscene
 
         frames = [render(subscene(scene, [], scene.surfels), camera, "points", settings)]
         if scene.objects:
             parametric = subscene(scene, scene.objects)
-            frames.insert(0, render_tess(parametric, camera, settings.tess, settings.lod,
-                                         lod_stage=renderer_for(parametric).lod,
-                                         uploader=renderer_for(parametric).upload))
+            frames.insert(0, render_tess(parametric, camera, settings.tess, settings.lod))
         return composite(frames, background=scene.background)
     return renderer_for(scene).render(scene, camera, settings, variant)

@@ -539,38 +539,17 @@ class TessRenderer:
 
 
 # --- the whole frame ----------------------------------------------------------------------------
-@dataclass
-class _Pipeline:
-    lod: object | None
-    tess: TessRenderer
-
-
-_pipelines: dict[tuple, _Pipeline] = {}
-
-
-def _pipeline_for(scene: Scene) -> _Pipeline:
-    funcs = scene.functions()
-    key = tuple(id(f) for f in funcs)
-    p = _pipelines.get(key)
-    if p is None:
-        p = _pipelines[key] = _Pipeline(None, TessRenderer(funcs))
-    return p
-
-
 def render_tess(scene: Scene, camera: Camera, settings: TessSettings | None = None, lod_settings=None,
-                lod_stage=None, uploader=None) -> Frame:
+                lod_stage=None) -> Frame:
     """One frame with the tessellation variant: instance buffers -> LOD stage (thresholds divided
     by ``lod_divisor`` of the effective AA mode) -> render list to host -> tessellation -> Frame.
 
-    ``uploader``: a function (scene, camera) -> device buffers, such as ``Renderer.upload``, that
-    caches the instance buffers between frames.
-    ``lod_stage``: a LodStage built for ``scene.functions()`` to use (for example the one of
-    ``paramlod.render.Renderer``); by default one is built and kept per set of functions."""
-    import pyopencl.array as cla
-
+    The device buffers, the LOD stage and this TessRenderer are those of ``paramlod.render``'s
+    Renderer for the scene's functions (instance buffers are sent once per scene change);
+    ``lod_stage`` overrides the LOD stage."""
     from .device import cl_device
     from .lod import LodSettings
-    from .render import camera_record
+    from .render import renderer_for
 
     if not isinstance(scene, Scene) or not scene.objects:
         raise SceneError("the scene has no objects; add one with scene.add(...)")
@@ -579,31 +558,20 @@ def render_tess(scene: Scene, camera: Camera, settings: TessSettings | None = No
     lod_settings = lod_settings or LodSettings()
     lod_settings.validate()
     t0 = time.perf_counter()
-    pipe = _pipeline_for(scene)
-    if lod_stage is None:
-        from .lod import LodStage
-
-        if pipe.lod is None:
-            pipe.lod = LodStage(pipe.tess.functions)
-        lod_stage = pipe.lod
-    _, aa, _ = pipe.tess.effective_aa(settings.aa)
+    r = renderer_for(scene)
+    lod_stage = lod_stage or r.lod
+    tess = r.tess_renderer()
+    _, aa, _ = tess.effective_aa(settings.aa)
     div = aa.divisor
-    if uploader is not None:   # the point Renderer's upload: instance buffers sent once per scene change
-        dev = uploader(scene, camera)
-        inst, count, domains, cam = dev["inst"], dev["count"], dev["domains"], dev["cam"]
-    else:
-        q = cl_device().queue
-        inst_f, inst_u, params = scene.instance_buffers()
-        inst = tuple(cla.to_device(q, a).data for a in (inst_f, inst_u, params))
-        count, domains = len(inst_f), inst_f[:, 28:32]
-        cam = cla.to_device(q, camera_record(camera)).data
+    dev = r.upload(scene, camera)
+    inst, count, domains, cam = dev["inst"], dev["count"], dev["domains"], dev["cam"]
     t1 = time.perf_counter()
     _, n, steps, lod_ms = lod_stage.run(inst, count, domains, cam, lod_settings, t_div=div)
     t2 = time.perf_counter()
     records = lod_stage.read_render_list(n)
     t3 = time.perf_counter()
     tu, tv = (t / div for t in lod_settings.threshold)
-    frame = pipe.tess.draw(records, n, scene, camera, settings, threshold=(tu, tv))
+    frame = tess.draw(records, n, scene, camera, settings, threshold=(tu, tv))
     t4 = time.perf_counter()
     ms = frame.stats["ms"]
     ms["render_list_read"] = (t3 - t2) * 1e3
