@@ -1,4 +1,4 @@
-// LOD stage: one PATCH SUBDIVISION step (thesis section 5.5.1), one work-item per patch.
+// LOD stage: one PATCH SUBDIVISION step (thesis section 5.5.1), one work-group of 32 per patch.
 // Per patch: 8 samples along u on 4 rows (v at 1/8, 3/8, 5/8, 7/8 of the range), 8 along v on 4
 // columns, and a 5x5 grid of extra samples for the frustum test and the screen bounding box.
 // Each line's screen polyline length is compared with the threshold; a line that exceeds it
@@ -63,48 +63,17 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
     }
 }
 
-inline void lod_patch(EvalPatch patch, __global EvalPatch* out, uint out_cap,
-                      __global RenderPatch* render, uint render_cap,
-                      __global uint* counters, __global uint* render_count,
-                      __global const float* inst_f, __global const uint* inst_u,
-                      __global const float* params, __global const float* cam,
-                      float t_u, float t_v, uint step, uint force)
+// The decision for one measured patch: cull, render (or force out on the last step), or split
+// into 2, 3 or 4 children by the 7 patterns. eu, ev: the four u- and v-polyline lengths; mu_seg,
+// mv_seg: their longest segments; box: screen bounding box; code: AND of the samples' outcodes.
+inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, float mu_seg, float mv_seg,
+                       float4 box, uint code, __global EvalPatch* out, uint out_cap,
+                       __global RenderPatch* render, uint render_cap,
+                       __global uint* counters, __global uint* render_count,
+                       float t_u, float t_v, uint step, uint force)
 {
     uint inst = patch.inst;
-    __global const float* I = inst_f + inst * INST_F;
-    uint func = inst_u[inst * INST_U + 0];
-    __global const float* P = params + inst_u[inst * INST_U + 1];
     float u0 = patch.range.x, u1 = patch.range.y, v0 = patch.range.z, v1 = patch.range.w;
-    float du = u1 - u0, dv = v1 - v0;
-
-    uint code = 63u;
-    float4 box = (float4)(INFINITY, INFINITY, -INFINITY, -INFINITY);
-    float eu[4], ev[4], mu_seg = 0.0f, mv_seg = 0.0f;
-    for (int k = 0; k < 4; ++k) {
-        float fk = ((float)k + 0.5f) * 0.25f;
-        // a row along u at fixed v, and a column along v at fixed u
-        Sample pu = lod_sample(func, P, I, cam, u0, v0 + dv * fk);
-        Sample pv = lod_sample(func, P, I, cam, u0 + du * fk, v0);
-        code &= pu.code & pv.code; grow_box(&box, pu); grow_box(&box, pv);
-        float su = 0.0f, sv = 0.0f;
-        for (int i = 1; i < 8; ++i) {
-            float fi = (float)i * (1.0f / 7.0f);
-            Sample qu = lod_sample(func, P, I, cam, u0 + du * fi, v0 + dv * fk);
-            Sample qv = lod_sample(func, P, I, cam, u0 + du * fk, v0 + dv * fi);
-            float lu = seg_len(pu, qu), lv = seg_len(pv, qv);
-            su += lu; sv += lv;
-            mu_seg = fmax(mu_seg, lu); mv_seg = fmax(mv_seg, lv);
-            code &= qu.code & qv.code; grow_box(&box, qu); grow_box(&box, qv);
-            pu = qu; pv = qv;
-        }
-        eu[k] = su; ev[k] = sv;
-    }
-    for (int j = 0; j < 5; ++j) {
-        for (int i = 0; i < 5; ++i) {
-            Sample q = lod_sample(func, P, I, cam, u0 + du * ((float)i * 0.25f), v0 + dv * ((float)j * 0.25f));
-            code &= q.code; grow_box(&box, q);
-        }
-    }
     if (code != 0u) { atomic_inc(&counters[C_CULLED]); return; }  // every sample outside one clip plane
 
     bool a = eu[0] > t_u || eu[1] > t_u;   // u-lines in the lower v half
@@ -171,22 +140,91 @@ inline void lod_patch(EvalPatch patch, __global EvalPatch* out, uint out_cap,
     }
 }
 
-// One LOD step. The number of input patches is read on the device (the previous step's child
-// count), so the host records all steps without waiting for any of them and reads the counters
-// once per frame; work-items stride over the patches. A step whose input overflowed its buffer
-// only sees the first `cap` patches: the host detects that afterwards and redoes the stage.
-__kernel void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
-                       __global RenderPatch* render, uint render_cap,
-                       __global uint* counters,   // per step: LOD_COUNTERS uints; see lod.py
-                       __global const float* inst_f, __global const uint* inst_u,
-                       __global const float* params, __global const float* cam,
-                       float t_u, float t_v, uint step, uint force)
+// Where sample s of a patch lies (s < LOD_SAMPLES): 0..31 the four u-lines (8 samples each, at
+// v = 1/8, 3/8, 5/8, 7/8 of the range), 32..63 the four v-lines, 64..88 the 5x5 extra grid.
+#define LOD_SAMPLES 89
+inline float2 lod_uv(uint s, float u0, float v0, float du, float dv) {
+    if (s < 64u) {
+        uint k = (s & 31u) >> 3, i = s & 7u;
+        float fk = ((float)k + 0.5f) * 0.25f;
+        float fi = (float)i * (1.0f / 7.0f);
+        if (s < 32u) return (float2)(i == 0u ? u0 : u0 + du * fi, v0 + dv * fk);
+        return (float2)(u0 + du * fk, i == 0u ? v0 : v0 + dv * fi);
+    }
+    uint e = s - 64u;
+    return (float2)(u0 + du * ((float)(e % 5u) * 0.25f), v0 + dv * ((float)(e / 5u) * 0.25f));
+}
+
+// One LOD step: a work-group of LOD_LOCAL work-items measures one patch at a time, each work-item
+// evaluating some of its 89 samples (a patch's samples are the expensive part, and a step with a
+// few hundred patches would leave most of a GPU idle with one work-item per patch). The number
+// of input patches is read on the device (the previous step's child count), so the host enqueues
+// all steps without waiting and reads the counters once per frame; work-groups stride over the
+// patches. A step whose input overflowed its buffer only sees the first `cap` patches: the host
+// detects that afterwards and redoes the stage.
+#define LOD_LOCAL 32
+__kernel __attribute__((reqd_work_group_size(LOD_LOCAL, 1, 1)))
+void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
+              __global RenderPatch* render, uint render_cap,
+              __global uint* counters,   // per step: LOD_COUNTERS uints; see lod.py
+              __global const float* inst_f, __global const uint* inst_u,
+              __global const float* params, __global const float* cam,
+              float t_u, float t_v, uint step, uint force)
 {
+    __local float2 pos[LOD_SAMPLES];
+    __local int state[LOD_SAMPLES];
+    __local float4 box_part[LOD_LOCAL];
+    __local uint code_part[LOD_LOCAL];
+    __local float line[16];   // 0..3 u-line lengths, 4..7 v-line lengths, 8..15 their longest segments
     uint n_in = min(counters[(step - 1) * LOD_COUNTERS + C_CHILDREN], cap);
     __global uint* c = counters + step * LOD_COUNTERS;
     __global uint* render_count = counters + LOD_RENDER_TOTAL;
-    for (uint i = get_global_id(0); i < n_in; i += get_global_size(0)) {
-        lod_patch(in[i], out, cap, render, render_cap, c, render_count,
-                  inst_f, inst_u, params, cam, t_u, t_v, step, force);
+    uint l = get_local_id(0);
+    for (uint i = get_group_id(0); i < n_in; i += get_num_groups(0)) {
+        EvalPatch patch = in[i];
+        uint inst = patch.inst;
+        __global const float* I = inst_f + inst * INST_F;
+        uint func = inst_u[inst * INST_U + 0];
+        __global const float* P = params + inst_u[inst * INST_U + 1];
+        float u0 = patch.range.x, v0 = patch.range.z;
+        float du = patch.range.y - u0, dv = patch.range.w - v0;
+        float4 box = (float4)(INFINITY, INFINITY, -INFINITY, -INFINITY);
+        uint code = 63u;
+        for (uint s = l; s < LOD_SAMPLES; s += LOD_LOCAL) {
+            float2 uv = lod_uv(s, u0, v0, du, dv);
+            Sample q = lod_sample(func, P, I, cam, uv.x, uv.y);
+            pos[s] = q.s; state[s] = q.state;
+            code &= q.code; grow_box(&box, q);
+        }
+        box_part[l] = box; code_part[l] = code;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        if (l < 8u) {   // one work-item per polyline, its segments summed in order (as the numpy twin)
+            float sum = 0.0f, longest = 0.0f;
+            for (uint k = 1; k < 8u; ++k) {
+                Sample sa, sb;
+                sa.s = pos[l * 8u + k - 1u]; sa.state = state[l * 8u + k - 1u];
+                sb.s = pos[l * 8u + k]; sb.state = state[l * 8u + k];
+                float len = seg_len(sa, sb);
+                sum += len; longest = fmax(longest, len);
+            }
+            line[l] = sum; line[8u + l] = longest;
+        }
+        for (uint h = LOD_LOCAL / 2; h > 0; h >>= 1) {   // box and outcode over the work-group
+            if (l < h) {
+                float4 o = box_part[l + h], m = box_part[l];
+                box_part[l] = (float4)(fmin(m.x, o.x), fmin(m.y, o.y), fmax(m.z, o.z), fmax(m.w, o.w));
+                code_part[l] &= code_part[l + h];
+            }
+            barrier(CLK_LOCAL_MEM_FENCE);
+        }
+        if (l == 0u) {
+            float eu[4] = {line[0], line[1], line[2], line[3]};
+            float ev[4] = {line[4], line[5], line[6], line[7]};
+            float mu_seg = fmax(fmax(line[8], line[9]), fmax(line[10], line[11]));
+            float mv_seg = fmax(fmax(line[12], line[13]), fmax(line[14], line[15]));
+            lod_decide(patch, eu, ev, mu_seg, mv_seg, box_part[0], code_part[0], out, cap, render,
+                       render_cap, c, render_count, t_u, t_v, step, force);
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);   // the next patch overwrites the local arrays
     }
 }

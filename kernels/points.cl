@@ -85,56 +85,94 @@ inline int point_sample(uint func, __global const float* P, __global const float
     return SAMPLE_DRAWN;
 }
 
-// Direct variant: one work-group per render patch, samples written straight into the shared
-// key buffers with early depth (write_point reads before it issues an atom_min).
-__kernel void points_direct(__global const RenderPatch* patches, uint n_patches,
-                            __global const float* inst_f, __global const uint* inst_u,
-                            __global const float* params, __global const float4* materials,
-                            __global const float* cam, __global const float* light,
-                            float factor, uint use_extent, float widen, uint max_side,
-                            __global ulong* color_buf, __global ulong* aux_buf,
-                            __global ulong* counters   // samples, atomics, NaN samples, capped patches
-#ifdef PL_RECORD
-                            // test hook: every sample's pixel (or ~0 if dropped) and colour key
-                            , __global const uint* rec_offset, __global uint* rec_pix, __global ulong* rec_key
-#endif
-                            )
-{
-    uint pid = get_group_id(0);
-    if (pid >= n_patches) return;
-    RenderPatch rp = patches[pid];
-    uint inst = rp.inst;
-    __global const float* I = inst_f + inst * INST_F;
-    uint func = inst_u[inst * INST_U + 0];
-    __global const float* P = params + inst_u[inst * INST_U + 1];
-    uint object_id = inst_u[inst * INST_U + 2];
-    float4 mat = materials[inst];
-    PointGrid g = point_grid(rp, I, factor, use_extent, widen, max_side);
-    uint W = (uint)cam[CAM_W];
-
-    ulong n_samples = 0, n_atomics = 0, n_nan = 0;
-    uint total = g.nu * g.nv;
-    for (uint j = get_local_id(0); j < total; j += get_local_size(0)) {
-        uint iu = j % g.nu, iv = j / g.nu;
-        float fx, fy;
-        ulong key, aux;
-        int r = point_sample(func, P, I, cam, mat, light, object_id,
-                             g.u0 + g.su * (float)iu, g.v0 + g.sv * (float)iv, &fx, &fy, &key, &aux);
-        n_samples++;
-#ifdef PL_RECORD
-        rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;
-#endif
-        if (r == SAMPLE_NAN) n_nan++;
-        if (r != SAMPLE_DRAWN) continue;
-        uint pix = (uint)fy * W + (uint)fx;
-#ifdef PL_RECORD
-        rec_pix[rec_offset[pid] + j] = pix;
-        rec_key[rec_offset[pid] + j] = key;
-#endif
-        n_atomics += write_point(color_buf, aux_buf, pix, key, aux);
+// Sums four per-work-item counters over the work-group in local memory, then one atom_add each:
+// global atomics from every work-item on the same four addresses would serialise.
+#define POINTS_LOCAL 64   // work-group size of points_direct (paramlod/points.py LOCAL_SIZE)
+inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* red) {
+    uint l = get_local_id(0);
+    red[l] = mine;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint s = POINTS_LOCAL / 2; s > 0; s >>= 1) {
+        if (l < s) red[l] += red[l + s];
+        barrier(CLK_LOCAL_MEM_FENCE);
     }
-    atom_add(&counters[0], n_samples);
-    atom_add(&counters[1], n_atomics);
-    atom_add(&counters[2], n_nan);
-    if (get_local_id(0) == 0 && (g.nu == max_side || g.nv == max_side)) atom_add(&counters[3], (ulong)1);
+    if (l == 0) {
+        ulong4 t = red[0];
+        if (t.x) atom_add(&counters[0], t.x);
+        if (t.y) atom_add(&counters[1], t.y);
+        if (t.z) atom_add(&counters[2], t.z);
+        if (t.w) atom_add(&counters[3], t.w);
+    }
+}
+
+// Direct variant: a work-group renders one render patch (or a share of one) at a time, its
+// samples written straight into the shared key buffers with early depth (write_point reads
+// before it issues an atom_min).
+// The patch count is read on the device (count[count_at], e.g. the LOD stage's render total,
+// capped at the list's capacity), so the host enqueues the LOD stage and this kernel without
+// waiting in between; work-groups stride over the patches.
+__kernel __attribute__((reqd_work_group_size(POINTS_LOCAL, 1, 1)))
+void points_direct(__global const RenderPatch* patches, __global const uint* count,
+                   uint count_at, uint capacity,
+                   __global const float* inst_f, __global const uint* inst_u,
+                   __global const float* params, __global const float4* materials,
+                   __global const float* cam, __global const float* light,
+                   float factor, uint use_extent, float widen, uint max_side,
+                   __global ulong* color_buf, __global ulong* aux_buf,
+                   __global ulong* counters   // samples, atomics, NaN samples, capped patches
+#ifdef PL_RECORD
+                   // test hook: every sample's pixel (or ~0 if dropped) and colour key
+                   , __global const uint* rec_offset, __global uint* rec_pix, __global ulong* rec_key
+#endif
+                   )
+{
+    uint n_patches = min(count[count_at], capacity);
+    // with fewer patches than work-groups, `split` work-groups share each patch's samples (a
+    // frame of a few hundred large patches would otherwise leave most of a GPU idle)
+    uint groups = (uint)get_num_groups(0), group = (uint)get_group_id(0);
+    uint split = max(1u, groups / max(n_patches, 1u));
+    uint part = group % split, lanes = split * POINTS_LOCAL;
+    uint group_stride = groups / split;
+    ulong n_samples = 0, n_atomics = 0, n_nan = 0, n_capped = 0;
+    for (uint pid = group / split; pid < n_patches && group < group_stride * split; pid += group_stride) {
+        RenderPatch rp = patches[pid];
+        uint inst = rp.inst;
+        __global const float* I = inst_f + inst * INST_F;
+        uint func = inst_u[inst * INST_U + 0];
+        __global const float* P = params + inst_u[inst * INST_U + 1];
+        uint object_id = inst_u[inst * INST_U + 2];
+        float4 mat = materials[inst];
+        PointGrid g = point_grid(rp, I, factor, use_extent, widen, max_side);
+        uint W = (uint)cam[CAM_W];
+        uint total = g.nu * g.nv;
+        for (uint j = part * POINTS_LOCAL + get_local_id(0); j < total; j += lanes) {
+            uint iu = j % g.nu, iv = j / g.nu;
+            float fx, fy;
+            ulong key, aux;
+            int r = point_sample(func, P, I, cam, mat, light, object_id,
+                                 g.u0 + g.su * (float)iu, g.v0 + g.sv * (float)iv, &fx, &fy, &key, &aux);
+            n_samples++;
+#ifdef PL_RECORD
+            rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;
+#endif
+            if (r == SAMPLE_NAN) n_nan++;
+            if (r != SAMPLE_DRAWN) continue;
+            uint pix = (uint)fy * W + (uint)fx;
+#ifdef PL_RECORD
+            rec_pix[rec_offset[pid] + j] = pix;
+            rec_key[rec_offset[pid] + j] = key;
+#endif
+            n_atomics += write_point(color_buf, aux_buf, pix, key, aux);
+        }
+        if (part == 0 && get_local_id(0) == 0 && (g.nu == max_side || g.nv == max_side)) n_capped++;
+    }
+#ifdef PL_GROUP_COUNTERS
+    __local ulong4 red[POINTS_LOCAL];
+    add_counters(counters, (ulong4)(n_samples, n_atomics, n_nan, n_capped), red);
+#else   // CPU devices: a barrier here makes PoCL's compiled work-group loops much slower
+    if (n_samples) atom_add(&counters[0], n_samples);
+    if (n_atomics) atom_add(&counters[1], n_atomics);
+    if (n_nan) atom_add(&counters[2], n_nan);
+    if (n_capped) atom_add(&counters[3], n_capped);
+#endif
 }

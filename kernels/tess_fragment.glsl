@@ -1,7 +1,7 @@
 // Fragment stage: the point renderer's shading (kernels/keys.cl shade(): two-sided Blinn-Phong in
 // view space) and the Frame's extra channels, into four colour attachments:
-//   0 colour RGBA16F (linear RGB, alpha 1), 1 linear view depth R32F (0 = nothing drawn),
-//   2 world-space normal facing the viewer RGBA16F, 3 object id R32UI (0 = nothing drawn).
+//   0 colour RGBA16F (linear RGB, alpha 1: alpha 0 = nothing drawn), 1 linear view depth R32F,
+//   2 world-space normal facing the viewer RGBA16F, 3 object id R32UI.
 centroid in vec3 te_view;
 centroid in vec3 te_normal;
 centroid in float te_bad;

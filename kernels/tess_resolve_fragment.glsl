@@ -4,16 +4,20 @@
 //           box-averaged over the block; the average is premultiplied by coverage, so alpha is the
 //           covered fraction of all samples and RGB is divided by it (straight alpha, as in Frame).
 //   depth, normal, object id: those of the nearest covered sample among all PL_SS^2 x PL_SAMPLES
-//           samples (depth 0 = not covered; the loop runs over the samples the device really
+//           samples (covered: the sample's colour alpha is 1; the draw clears only the colour
+//           and depth buffers, so the depth, normal and id of uncovered samples are stale and
+//           never read; the loop runs over the samples the device really
 //           allocated, which can be more than requested: llvmpipe gives 4 for a 2xMS request), +inf / 0 / 0 where no sample is covered. This matches
 //           the point renderer, whose atom_min keeps the nearest sample of a pixel.
 #ifdef PL_MS
+uniform sampler2DMS u_coverage;   // the multisampled colour: alpha 1 where drawn
 uniform sampler2DMS u_depth;
 uniform sampler2DMS u_normal;
 uniform usampler2DMS u_object;
 #define PL_FETCH(t, q, s) texelFetch(t, q, s)
 #define PL_DEVICE_SAMPLES textureSamples(u_depth)
 #else
+uniform sampler2D u_coverage;
 uniform sampler2D u_depth;
 uniform sampler2D u_normal;
 uniform usampler2D u_object;
@@ -40,8 +44,9 @@ void main() {
             ivec2 q = p * PL_SS + ivec2(sx, sy);
             c += texelFetch(u_color, q, 0);
             for (int s = 0; s < ns; ++s) {
+                if (PL_FETCH(u_coverage, q, s).a == 0.0) continue;
                 float d = PL_FETCH(u_depth, q, s).r;
-                if (d > 0.0 && d < best) {
+                if (d < best) {
                     best = d;
                     n = PL_FETCH(u_normal, q, s).xyz;
                     id = PL_FETCH(u_object, q, s).r;

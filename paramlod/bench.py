@@ -2,9 +2,10 @@
 
 For each scenario and variant the camera orbits the scene once at several distances (multiples of
 the distance at which the scene just fills the frame), after warm-up frames; per distance we report
-median and 95th-percentile frame time, LOD and render time, kernel (device) time and the host time
-around it, the CL->GL transfer of the tessellation variant, patches per LOD step, render patches,
-pixels written, overdraw, our device buffers and the host RSS. In the same run: the random 64-bit
+median and 95th-percentile frame time, LOD and render time, kernel (device) time, the Python time
+spent preparing and enqueueing a frame (host) and the time the device waited (idle), the CL->GL
+transfer of the tessellation variant, patches per LOD step, render patches, pixels written,
+overdraw, our device buffers and the host RSS. In the same run: the random 64-bit
 atom_min ceiling, the tessellated triangles/s of a trivial function, the OpenCL evaluation
 throughput of every built-in function, and the blue-surfel sampling and prefix-rendering costs.
 Results go to DIR/results.json (written after every measurement), DIR/results.md and plots.
@@ -129,13 +130,14 @@ def _device_buffers_mib(scene, size) -> float:
     return total / 2 ** 20
 
 
-def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, size):
+def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size):
     from .programs import start_timing, stop_timing
     from .render import RenderSettings, render
 
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
     rs.tess.l_max = l_max
+    rs.tess.l_min = l_min
     if aa:
         rs.tess.aa = aa
     rows = []
@@ -173,8 +175,10 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, size
         out["triangles"] = med(s.get("triangles", 0) for s in st)
         out["host_ms"] = None   # GL work is not timed by OpenCL events
     else:
-        # host: the part of the frame not covered by OpenCL kernels (Python, launches, transfers)
-        out["host_ms"] = max(0.0, out["frame_ms"] - out["cl_kernel_ms"])
+        # host: Python time preparing and enqueueing the frame (it overlaps the device's work);
+        # idle: the part of the frame not covered by OpenCL kernels (launch gaps, waits, transfers)
+        out["host_ms"] = med(s["ms"]["host"] for s in st)
+        out["idle_ms"] = max(0.0, out["frame_ms"] - out["cl_kernel_ms"])
     out["fps"] = 1e3 / out["frame_ms"] if out["frame_ms"] > 0 else float("inf")
     return out
 
@@ -274,19 +278,19 @@ def run_bench(args) -> int:
                   flush=True)
         save()
     for name in names:
-        build, direction, up, threshold, l_max = SCENARIOS[name]
+        build, direction, up, threshold, l_max, l_min = SCENARIOS[name]
         scene = build()
         base = framing_camera(scene, direction, up, 40.0, size, margin=1.0)
         lo, hi = scene_box(scene)
         centre = (lo + hi) / 2
         per = result["scenarios"].setdefault(name, {"instances": scene.instance_count, "threshold": threshold,
-                                                     "l_max": l_max, "variants": {}})
+                                                     "l_max": l_max, "l_min": l_min, "variants": {}})
         for vname in args.variants:
             variant, aa = VARIANTS[vname]
             rows = per["variants"].setdefault(vname, [])
             for dist in args.distances:
                 try:
-                    r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, size)
+                    r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size)
                 except ParamlodError as exc:
                     r = {"distance": dist, "error": str(exc)}
                 rows.append(r)

@@ -53,9 +53,10 @@ class KeyBuffer:
         return self.read_frame()
 
     def resolve_on_device(self):
-        """Decode the keys into colour, depth, normal and id buffers on the device."""
+        """Decode the keys into colour, depth, normal and id buffers on the device (enqueued;
+        returns the kernel's event)."""
         n = self.pixel_count
-        self._resolve(cl_device().queue, ((n + 255) // 256 * 256,), None, self.color, self.aux,
+        return self._resolve(cl_device().queue, ((n + 255) // 256 * 256,), None, self.color, self.aux,
                       np.uint32(n), *self._out)
 
     def read_frame(self) -> Frame:

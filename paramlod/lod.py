@@ -14,7 +14,7 @@ import numpy as np
 from .device import cl_device
 from .errors import CapacityError, SceneError
 from .patches import EVAL_DTYPE, RENDER_DTYPE, initial_patches
-from .programs import kernel
+from .programs import build, launch
 
 
 @dataclass
@@ -57,13 +57,19 @@ class _Buffer:
 
 LOD_COUNTERS = 8  # per-step counter record in kernels/lod.cl
 C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED = range(5)
+LOD_RENDER_TOTAL = 1  # counters[0, 1]: the render list's length (kernels/lod.cl)
+LOD_LOCAL = 32        # work-items measuring one patch together (kernels/lod.cl)
 
 
 class LodStage:
     def __init__(self, functions):
         import pyopencl as cl
 
-        self.kernel = kernel("lod_step", ["lod.cl"], functions)
+        prog = build(["lod.cl"], functions)
+        # one kernel object per step with its arguments bound once (they change only when a
+        # buffer grows or the scene, camera buffer or threshold changes): a frame only enqueues
+        self._step_kernels = [cl.Kernel(prog, "lod_step") for _ in range(15)]
+        self._bound = None
         self.bufs = [_Buffer(EVAL_DTYPE, 4096), _Buffer(EVAL_DTYPE, 4096)]
         self.render = _Buffer(RENDER_DTYPE, 4096)
         # PATCH INITIALIZATION's output, built and uploaded only when the instances change
@@ -71,9 +77,15 @@ class LodStage:
         self.init = _Buffer(EVAL_DTYPE, 4096)
         self._init_for = (None, None, 0)
         self.counters = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 16 * LOD_COUNTERS * 4)
+        # the counters at the start of a stage (initial patch count, zeros), kept on the device
+        self._start = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, 16 * LOD_COUNTERS * 4)
+        self._start_n = None
+        self._counts = np.zeros((16, LOD_COUNTERS), np.uint32)  # read back after it
+        self._steps_n = 0
+        self.events = []   # the last enqueued stage's kernel events (device timing)
         dev = cl_device()
-        # work-items per step (they stride over the patches): enough to fill the device
-        self.grid = dev.device.max_compute_units * (2048 if dev.is_gpu else 64)
+        # work-groups per step (they stride over the patches): enough to fill the device
+        self.max_groups = dev.device.max_compute_units * (64 if dev.is_gpu else 16)
 
     def run(self, inst, n_instances, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
         """Returns (render buffer, render patch count, per-step stats list, ms).
@@ -81,13 +93,26 @@ class LodStage:
         All steps are enqueued at once and the counters read back once; if a buffer overflowed,
         the buffers grow and the whole stage is redone (growth persists across frames).
         """
+        if len(domains) != n_instances:
+            raise ValueError(f"LodStage.run: {len(domains)} domains for {n_instances} instances")
+        t0 = time.perf_counter()
+        while True:
+            self.enqueue(inst, domains, cam_buf, settings, t_div)
+            self.read_counters()
+            if not self.grow(settings):
+                break
+        n_render, steps = self.result()
+        return self.render.buf, n_render, steps, (time.perf_counter() - t0) * 1e3
+
+    def enqueue(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
+        """Enqueue the whole stage without waiting: the render list lands in ``self.render.buf``
+        and its length in ``self.counters[LOD_RENDER_TOTAL]`` on the device, for a renderer that
+        reads the count there. Then ``read_counters`` (waits), ``grow`` (True: a buffer overflowed
+        and grew, enqueue the frame again) and ``result``."""
         import pyopencl as cl
 
         settings.validate()
-        if len(domains) != n_instances:
-            raise ValueError(f"LodStage.run: {len(domains)} domains for {n_instances} instances")
         q = cl_device().queue
-        t0 = time.perf_counter()
         src_domains, grid_for, n_init = self._init_for
         if src_domains is not domains or grid_for != tuple(settings.initial_grid):
             init = initial_patches(domains, settings.initial_grid)
@@ -97,45 +122,69 @@ class LodStage:
             if n_init:
                 cl.enqueue_copy(q, self.init.buf, init)
             self._init_for = (domains, tuple(settings.initial_grid), n_init)
+        for b in self.bufs:
+            b.ensure(n_init)
+        steps_n = self._steps_n = settings.max_steps
         tu, tv = (np.float32(t / t_div) for t in settings.threshold)
-        steps_n = settings.max_steps
-        counts = np.zeros((steps_n + 1, LOD_COUNTERS), np.uint32)
-        while True:
-            for b in self.bufs:
-                b.ensure(n_init)
-            counts[:] = 0
-            counts[0, C_CHILDREN] = n_init
-            cl.enqueue_copy(q, self.counters, counts)
-            cap = min(b.capacity for b in self.bufs)
-            grid = min(self.grid, _round_up(max(cap, 1), 64))
-            for step in range(1, steps_n + 1):
+        cap = min(b.capacity for b in self.bufs)
+        # the buffers themselves, not their ids: held here, they cannot be freed and their ids reused
+        bound = (*inst, cam_buf, float(tu), float(tv), steps_n, cap,
+                 *(b.buf for b in (self.init, *self.bufs, self.render)))
+        if bound != self._bound:
+            for step, k in enumerate(self._step_kernels[:steps_n], start=1):
                 src = self.init if step == 1 else self.bufs[(step - 1) % 2]
-                dst = self.bufs[step % 2]
-                self.kernel(q, (grid,), None, src.buf, dst.buf, np.uint32(cap),
-                            self.render.buf, np.uint32(self.render.capacity), self.counters,
-                            *inst, cam_buf, tu, tv, np.uint32(step), np.uint32(step == steps_n))
-            cl.enqueue_copy(q, counts, self.counters)  # blocking: the frame's one sync
-            children = counts[1:, C_CHILDREN].astype(np.int64)
-            n_render = int(counts[0, 1])
-            need = int(children.max(initial=0))
-            grew = False
-            if need > cap:
-                self._check(need, settings, "patches in one LOD step")
-                for b in self.bufs:
-                    grew |= b.ensure(need)
-            if n_render > self.render.capacity:
-                self._check(n_render, settings, "render patches")
-                grew |= self.render.ensure(n_render)
-            if not grew:
-                break
+                k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf,
+                           np.uint32(self.render.capacity), self.counters, *inst, cam_buf, tu, tv,
+                           np.uint32(step), np.uint32(step == steps_n))
+            self._bound = bound
+        if self._start_n != n_init:
+            start = np.zeros((16, LOD_COUNTERS), np.uint32)
+            start[0, C_CHILDREN] = n_init
+            cl.enqueue_copy(q, self._start, start)
+            self._start_n = n_init
+        # device-to-device: a write from host memory would make NVIDIA's driver wait here
+        cl.enqueue_copy(q, self.counters, self._start)
+        grid = (min(self.max_groups, max(cap, 1)) * LOD_LOCAL,)
+        self.events = [launch(q, k, grid, (LOD_LOCAL,)) for k in self._step_kernels[:steps_n]]
+
+    def read_counters(self):
+        """Wait for the enqueued stage and read its counters back."""
+        import pyopencl as cl
+
+        cl.enqueue_copy(cl_device().queue, self._counts, self.counters)
+
+    def grow(self, settings: LodSettings) -> bool:
+        """After the stage's read-back: grow the buffers that overflowed; True if any did."""
+        counts = self._counts
+        need = int(counts[1:self._steps_n + 1, C_CHILDREN].max(initial=0))
+        n_render = int(counts[0, LOD_RENDER_TOTAL])
+        grew = False
+        if need > min(b.capacity for b in self.bufs):
+            self._check(need, settings, "patches in one LOD step")
+            for b in self.bufs:
+                grew |= b.ensure(need)
+        if n_render > self.render.capacity:
+            self._check(n_render, settings, "render patches")
+            grew |= self.render.ensure(n_render)
+        return grew
+
+    def result(self) -> tuple[int, list[dict]]:
+        """(render patch count, per-step stats) of the last stage read back."""
+        counts = self._counts
         steps = []
-        n_in = n_init
-        for step in range(1, steps_n + 1):
+        n_in = int(counts[0, C_CHILDREN])
+        for step in range(1, self._steps_n + 1):
             c = counts[step]
             steps.append({"step": step, "in": n_in, "split": int(c[C_SPLIT]), "culled": int(c[C_CULLED]),
                           "out": int(c[C_RENDERED]), "forced": int(c[C_FORCED])})
             n_in = int(c[C_CHILDREN])
-        return self.render.buf, n_render, steps, (time.perf_counter() - t0) * 1e3
+        return int(counts[0, LOD_RENDER_TOTAL]), steps
+
+    def device_ms(self) -> float:
+        """Device time of the last stage, first step start to last step end (after its sync)."""
+        if not self.events:
+            return 0.0
+        return (self.events[-1].profile.end - self.events[0].profile.start) * 1e-6
 
     @staticmethod
     def _check(n, settings, what):
@@ -153,6 +202,3 @@ class LodStage:
             cl.enqueue_copy(cl_device().queue, out, self.render.buf)
         return out
 
-
-def _round_up(n, m):
-    return max(m, (n + m - 1) // m * m)

@@ -99,26 +99,50 @@ def count_holes(frame, mask: np.ndarray, depth: np.ndarray | None = None, tol: f
 
 class DirectPointRenderer:
     def __init__(self, functions, record: bool = False):
-        defines = {"PL_RECORD": 1} if record else None
-        self.kernel = kernel("points_direct", ["keys.cl", "points.cl"], functions, defines)
-        self.record = record
         import pyopencl as cl
 
-        self.counters = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8 * len(COUNTERS))
+        defines = {"PL_RECORD": 1} if record else {}
+        if cl_device().is_gpu:   # sum the counters per work-group (see the end of points_direct)
+            defines["PL_GROUP_COUNTERS"] = 1
+        self.kernel = kernel("points_direct", ["keys.cl", "points.cl"], functions, defines)
+        self.record = record
+        dev = cl_device()
+        self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * len(COUNTERS))
+        self._count = cl.Buffer(dev.context, cl.mem_flags.READ_ONLY, 4)   # a host-given patch count
+        self._counts = np.zeros(len(COUNTERS), np.uint64)
+        self.event = None
+        # work-groups stride over the patches: about one resident wave on a GPU
+        self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
 
-    def draw(self, patches_buf, n_patches, inst, materials_buf, cam_buf, light_buf, keys,
-             settings: PointSettings, record_args=()):
-        """Render ``n_patches`` render patches into ``keys``; returns the counters (COUNTERS)."""
+    def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
+                light_buf, keys, settings: PointSettings, record_args=()):
+        """Enqueue the render of the ``count_buf[count_at]`` (read on the device, at most
+        ``capacity``) patches of ``patches_buf`` without waiting; ``counts()`` reads the counters."""
         import pyopencl as cl
 
         settings.validate()
         q = cl_device().queue
-        zero = np.zeros(len(COUNTERS), np.uint64)
-        cl.enqueue_copy(q, self.counters, zero)
-        if n_patches:
-            self.kernel(q, (n_patches * LOCAL_SIZE,), (LOCAL_SIZE,),
-                        patches_buf, np.uint32(n_patches), *inst, materials_buf, cam_buf, light_buf,
-                        settings.factor(), np.uint32(settings.use_extent), np.float32(settings.widen),
-                        np.uint32(settings.max_side), keys.color, keys.aux, self.counters, *record_args)
-        cl.enqueue_copy(q, zero, self.counters)
-        return {k: int(v) for k, v in zip(COUNTERS, zero)}
+        cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * len(COUNTERS))
+        groups = max(1, min(int(capacity), self.max_groups))
+        self.event = self.kernel(q, (groups * LOCAL_SIZE,), (LOCAL_SIZE,),
+                                 patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity),
+                                 *inst, materials_buf, cam_buf, light_buf,
+                                 settings.factor(), np.uint32(settings.use_extent), np.float32(settings.widen),
+                                 np.uint32(settings.max_side), keys.color, keys.aux, self.counters, *record_args)
+
+    def counts(self) -> dict:
+        """Wait for the last render and return its counters (COUNTERS)."""
+        import pyopencl as cl
+
+        cl.enqueue_copy(cl_device().queue, self._counts, self.counters)
+        return {k: int(v) for k, v in zip(COUNTERS, self._counts)}
+
+    def draw(self, patches_buf, n_patches, inst, materials_buf, cam_buf, light_buf, keys,
+             settings: PointSettings, record_args=()):
+        """Render ``n_patches`` render patches into ``keys`` and wait; returns the counters (COUNTERS)."""
+        import pyopencl as cl
+
+        cl.enqueue_copy(cl_device().queue, self._count, np.array([n_patches], np.uint32))
+        self.enqueue(patches_buf, self._count, 0, n_patches, inst, materials_buf, cam_buf, light_buf, keys,
+                     settings, record_args)
+        return self.counts()

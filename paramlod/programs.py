@@ -33,13 +33,14 @@ def context_lines(src: str, log: str, pattern: str = CL_LINE, around: int = 3) -
     return "\n...\n".join(shown)
 
 
-def build(files: list[str], functions=(), defines: dict | None = None):
-    """Compile common.cl + the functions' generated code + ``files`` (names in kernels/)."""
+def build(files: list[str], functions=(), defines: dict | None = None, options: tuple = ()):
+    """Compile common.cl + the functions' generated code + ``files`` (names in kernels/);
+    ``options`` are extra compiler options."""
     import pyopencl as cl
 
     gen = cl_dispatch_source(list(functions)) if functions else ""
     src = "\n".join([kernels.source("common.cl"), gen, *(kernels.source(f) for f in files)])
-    opts = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items()))
+    opts = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items())) + tuple(options)
     dev = cl_device()
     key = (src, opts, id(dev.context))
     prog = _cache.get(key)
@@ -77,6 +78,17 @@ class TimedKernel:
         return getattr(self.k, name)
 
 
+def launch(queue, k, global_size, local_size=None):
+    """Enqueue a cl.Kernel whose arguments are already set (no per-launch argument conversion);
+    recorded like TimedKernel launches while a measurement runs."""
+    import pyopencl as cl
+
+    evt = cl.enqueue_nd_range_kernel(queue, k, global_size, local_size)
+    if _timing is not None:
+        _timing.append(evt)
+    return evt
+
+
 def start_timing() -> None:
     global _timing
     _timing = []
@@ -93,11 +105,11 @@ def stop_timing() -> float:
     return total * 1e-6
 
 
-def kernel(name: str, files: list[str], functions=(), defines: dict | None = None):
-    """A kernel object from ``build(files, functions, defines)``, retrieved once and reused."""
+def kernel(name: str, files: list[str], functions=(), defines: dict | None = None, options: tuple = ()):
+    """A kernel object from ``build(files, functions, defines, options)``, retrieved once and reused."""
     import pyopencl as cl
 
-    prog = build(files, functions, defines)
+    prog = build(files, functions, defines, options)
     key = (id(prog), name)
     k = _kernels.get(key)
     if k is None:

@@ -10,7 +10,7 @@ from .camera import Camera
 from .device import cl_device
 from .errors import SceneError
 from .framebuffer import KeyBuffer
-from .lod import LodSettings, LodStage
+from .lod import LOD_RENDER_TOTAL, LodSettings, LodStage
 from .points import COUNTERS, DirectPointRenderer, PointSettings
 from .points_lfb import LocalFramebufferRenderer, SsaaSettings
 from .scene import Scene
@@ -50,6 +50,7 @@ class Renderer:
         self.keys: KeyBuffer | None = None
         self._scene_key, self._scene_dev = None, None
         self._cam_buf = None   # the camera record, rewritten every frame
+        self._cam_host = None
 
     def tess_renderer(self):
         """The tessellation renderer for these functions (OpenGL), created on first use."""
@@ -82,42 +83,66 @@ class Renderer:
             self._scene_key = key
         if self._cam_buf is None:
             self._cam_buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, 36 * 4)
-        cl.enqueue_copy(q, self._cam_buf, camera_record(camera))
+        # not waited for: every frame ends with a wait, so the host copy is free to change then
+        self._cam_host = camera_record(camera)
+        cl.enqueue_copy(q, self._cam_buf, self._cam_host, is_blocking=False)
         dev = dict(self._scene_dev, cam=self._cam_buf)
         if self.keys is None or (self.keys.width, self.keys.height) != camera.size:
             self.keys = KeyBuffer(*camera.size)
         return dev
 
     def render(self, scene: Scene, camera: Camera, settings: RenderSettings, variant: str = "points"):
+        """One frame. The direct point variant enqueues the whole frame (LOD stage, render,
+        resolve) and waits once at its end: the renderer reads the patch count on the device.
+        If a LOD buffer overflowed, it grew and the frame is enqueued again."""
         t0 = time.perf_counter()
         dev = self.upload(scene, camera)
-        t1 = time.perf_counter()
-        t_div = settings.ssaa.lod_divisor if variant == "points-ssaa" else 1.0
-        n_render, steps, lod_ms = 0, [], 0.0
-        if self.lod is not None:
-            rbuf, n_render, steps, lod_ms = self.lod.run(dev["inst"], dev["count"], dev["domains"],
-                                                         dev["cam"], settings.lod, t_div=t_div)
-        t2 = time.perf_counter()
-        self.keys.clear()
-        counters = {k: 0 for k in COUNTERS}
-        if self.lod is not None:
-            if variant == "points-ssaa":
+        t_upload = time.perf_counter()
+        host = 0.0   # Python time spent enqueueing (the rest of the frame is waiting)
+        while True:
+            t1 = time.perf_counter()
+            self.keys.clear()
+            n_render, steps, counters = 0, [], {k: 0 for k in COUNTERS}
+            if self.lod is not None and variant == "points":
+                self.lod.enqueue(dev["inst"], dev["domains"], dev["cam"], settings.lod)
+                self.points.enqueue(self.lod.render.buf, self.lod.counters, LOD_RENDER_TOTAL,
+                                    self.lod.render.capacity, dev["inst"], dev["materials"], dev["cam"],
+                                    dev["light"], self.keys, settings.points)
+            elif self.lod is not None:   # points-ssaa needs the patch count on the host
+                self.lod.enqueue(dev["inst"], dev["domains"], dev["cam"], settings.lod,
+                                 t_div=settings.ssaa.lod_divisor)
+                host += time.perf_counter() - t1
+                self.lod.read_counters()
+                t1 = time.perf_counter()
+                if self.lod.grow(settings.lod):
+                    continue
                 if self.ssaa is None:
                     self.ssaa = LocalFramebufferRenderer(self.functions)
-                drawer, opts = self.ssaa, settings.ssaa
-            else:
-                drawer, opts = self.points, settings.points
-            counters = drawer.draw(rbuf, n_render, dev["inst"], dev["materials"], dev["cam"],
-                                   dev["light"], self.keys, opts)
-        surfel_stats = self.draw_surfels(scene, camera)
-        cl_device().queue.finish()
-        t3 = time.perf_counter()
-        self.keys.resolve_on_device()
-        cl_device().queue.finish()
+                ssaa_t0 = time.perf_counter()
+                counters = self.ssaa.draw(self.lod.render.buf, self.lod.result()[0], dev["inst"],
+                                          dev["materials"], dev["cam"], dev["light"], self.keys, settings.ssaa)
+                ssaa_ms = (time.perf_counter() - ssaa_t0) * 1e3   # it waits for its scan and bins
+            surfel_stats = self.draw_surfels(scene, camera)
+            resolved = self.keys.resolve_on_device()
+            host += time.perf_counter() - t1
+            if self.lod is not None and variant == "points":
+                self.lod.read_counters()   # the frame's one wait
+            resolved.wait()
+            if self.lod is None:
+                break
+            if not self.lod.grow(settings.lod):
+                n_render, steps = self.lod.result()
+                if variant == "points":
+                    counters = self.points.counts()
+                break
         t4 = time.perf_counter()
         frame = self.keys.read_frame()
         t5 = time.perf_counter()
         written = int(np.count_nonzero(np.isfinite(frame.depth)))
+        lod_ms = self.lod.device_ms() if self.lod is not None else 0.0
+        render_ms = 0.0
+        if self.lod is not None:
+            render_ms = _event_ms(self.points.event) if variant == "points" else ssaa_ms
         frame.stats = {
             "device": cl_device().name,
             "variant": variant,
@@ -131,13 +156,15 @@ class Renderer:
             "overdraw": counters["atomics"] / written if written else 0.0,
             # "frame" is the work of a frame up to resolved buffers on the device (what an
             # interactive viewer pays); "readback" copies them to the host for the Frame.
-            "ms": {"upload": (t1 - t0) * 1e3, "lod": lod_ms, "render": (t3 - t2) * 1e3,
-                   "resolve": (t4 - t3) * 1e3, "frame": (t4 - t0) * 1e3, "readback": (t5 - t4) * 1e3,
-                   "total": (t5 - t0) * 1e3},
+            # "lod", "resolve" and the direct variant's "render" are device times of those
+            # kernels (points-ssaa's "render" is wall time: it waits inside); "host" is the
+            # Python time spent preparing and enqueueing the frame.
+            "ms": {"upload": (t_upload - t0) * 1e3, "lod": lod_ms, "render": render_ms,
+                   "resolve": _event_ms(resolved), "host": (t_upload - t0 + host) * 1e3,
+                   "frame": (t4 - t0) * 1e3, "readback": (t5 - t4) * 1e3, "total": (t5 - t0) * 1e3},
         }
         frame.background = scene.background
         return frame
-
 
     def draw_surfels(self, scene: Scene, camera: Camera) -> list[dict]:
         """Splat each surfel object's prefix into the same key buffer (composed by depth)."""
@@ -147,6 +174,10 @@ class Renderer:
 
         return [draw_surfels(self.keys, camera, so.surfels, so.strategy, so.transform, so.object_id, so.specular)
                 for so in scene.surfels]
+
+
+def _event_ms(evt) -> float:
+    return (evt.profile.end - evt.profile.start) * 1e-6
 
 
 _renderers: dict[tuple, Renderer] = {}

@@ -20,7 +20,7 @@ from .transforms import matrix as as_matrix, rotate, scale, translate
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation"}
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches",
-               "aa", "levels", "l_min", "l_max", "spacing"}
+               "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "translate", "rotate", "scale", "matrix", "variant",
                "instances", "sh_field", "surfels"}
 ANIMATION_KEYS = {"frames", "t0", "t1", "fps"}
@@ -306,6 +306,10 @@ def _tess_settings(r: dict, ck: _Checker):
     ts.l_max = ck.num(r, "l_max", "render", "render", default=ts.l_max, lo=1, hi=64)
     if "spacing" in r:
         ts.spacing = r["spacing"]
+    if "msaa_lod" in r:
+        if not isinstance(r["msaa_lod"], bool):
+            ck.fail("render.msaa_lod", f"must be true or false, got {r['msaa_lod']!r}", "render", None, "msaa_lod")
+        ts.msaa_lod = r["msaa_lod"]
     try:
         ts.validate()
     except ParamlodError as exc:

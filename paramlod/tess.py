@@ -10,7 +10,7 @@ Anti-aliasing modes (``parse_aa``): ``noAA``; ``2xMS``/``4xMS``/``8xMS`` (aliase
 ``4xSS``/``9xSS``/``16xSS`` (2x2, 3x3, 4x4 supersampling; aliases ``ssaa2x2`` ...); and
 combinations such as ``4xSS+8xMS`` (32 depth samples per pixel). A multisample request above what
 the device supports is capped, with a warning and ``stats["warnings"]``. The LOD thresholds are
-divided by ``lod_divisor(mode)`` = sqrt(samples per pixel), as the thesis does.
+divided by ``lod_divisor(mode)``: the supersampling factor per axis (``msaa_lod`` adds sqrt(MSAA)).
 
 Targets: colour RGBA16F (hardware multisample resolve, then a box downsample of the SSAA block),
 linear view depth R32F, world normal RGBA16F and object id R32UI (resolved to the nearest covered
@@ -59,9 +59,11 @@ class AAMode:
     def samples_per_pixel(self) -> int:
         return self.ss * self.ss * self.msaa
 
-    @property
-    def divisor(self) -> float:
-        return math.sqrt(self.samples_per_pixel)
+    def divisor(self, msaa_lod: bool = False) -> float:
+        """LOD threshold divisor: ``ss``, so the LOD stage measures patches in the supersampled
+        target's pixels (the thesis's 4xSS+8xMS figures: 4x the patches of noAA "due to 4xSS");
+        with ``msaa_lod`` also sqrt(msaa), the hybrid scheme's guideline (sqrt(32) for 4xSS+8xMS)."""
+        return self.ss * (math.sqrt(self.msaa) if msaa_lod else 1.0)
 
     @property
     def name(self) -> str:
@@ -111,14 +113,14 @@ def parse_aa(mode) -> AAMode:
     return AAMode(ss, ms)
 
 
-def lod_divisor(mode, max_samples: int | None = None) -> float:
-    """Threshold divisor of an AA mode: sqrt(effective samples per pixel), e.g. sqrt(8) for 8xMS,
-    2 for 4xSS, sqrt(32) for 4xSS+8xMS. With ``max_samples`` the multisample count is first capped
-    to what the device supports."""
+def lod_divisor(mode, max_samples: int | None = None, msaa_lod: bool = False) -> float:
+    """Threshold divisor of an AA mode (``AAMode.divisor``): 2 for 4xSS and 4xSS+8xMS, 1 for 8xMS;
+    with ``msaa_lod`` sqrt(samples per pixel): sqrt(8) for 8xMS, sqrt(32) for 4xSS+8xMS. With
+    ``max_samples`` the multisample count is first capped to what the device supports."""
     aa = parse_aa(mode)
     if max_samples is not None and aa.msaa > 1:
         aa = AAMode(aa.ss, _cap_samples(aa.msaa, max_samples))
-    return aa.divisor
+    return aa.divisor(msaa_lod)
 
 
 def _cap_samples(requested: int, max_samples: int) -> int:
@@ -148,6 +150,7 @@ class TessSettings:
     spacing: str = "fractional_odd"
     aa: str = "noAA"
     overlap: float = 0.005
+    msaa_lod: bool = False   # divide the LOD threshold by sqrt(msaa) too (see AAMode.divisor)
 
     def validate(self):
         if self.mode not in ("adaptive", "fixed"):
@@ -230,6 +233,10 @@ def _resolve_program(ctx, ss: int, samples: int):
             "fragment_shader": _stage(defs, [kernels.source("tess_resolve_fragment.glsl")]),
         }, [])
     return prog
+
+
+_DRAW_MASK = ((True,) * 4,) * 4                        # colour, depth, normal, object id
+_CLEAR_MASK = ((True,) * 4,) + ((False,) * 4,) * 3
 
 
 def _set(prog, name, value):
@@ -413,7 +420,8 @@ class TessRenderer:
         for msg in notes:
             warnings.warn(msg, RuntimeWarning, stacklevel=2)
         if threshold is None:
-            threshold = (84.0 / aa.divisor, 84.0 / aa.divisor)
+            div = aa.divisor(settings.msaa_lod)
+            threshold = (84.0 / div, 84.0 / div)
         tu, tv = (float(x) for x in threshold)
         if not (tu > 0 and tv > 0):
             raise SceneError(f"tess threshold must be positive pixels, got {threshold}")
@@ -459,7 +467,12 @@ class TessRenderer:
         self._counters.bind_to_storage_buffer(4)
 
         tg.fbo.use()
+        # only the colour (its alpha marks covered samples) and the depth buffer are cleared: the
+        # resolve never reads the other attachments where nothing was drawn, and on the H200
+        # each cleared 4xSS+8xMS attachment costs 5-10 ms (its graphics units are few)
+        tg.fbo.color_mask = _CLEAR_MASK
         tg.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        tg.fbo.color_mask = _DRAW_MASK
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         triangles, draw_calls = 0, 0
@@ -482,8 +495,9 @@ class TessRenderer:
         ctx.disable(moderngl.DEPTH_TEST)
         tg.out_fbo.use()
         self._counters.bind_to_storage_buffer(4)
-        for unit, (name, tex) in enumerate((("u_color", tg.color_resolved), ("u_depth", tg.depth),
-                                            ("u_normal", tg.normal), ("u_object", tg.object))):
+        for unit, (name, tex) in enumerate((("u_color", tg.color_resolved), ("u_coverage", tg.color),
+                                            ("u_depth", tg.depth), ("u_normal", tg.normal),
+                                            ("u_object", tg.object))):
             tex.use(location=unit)
             _set(resolve, name, unit)
         self._resolve_vao(resolve).render(mode=moderngl.TRIANGLES, vertices=3)
@@ -514,7 +528,7 @@ class TessRenderer:
             "msaa_samples_device": device_samples,
             "ssaa": aa.ss,
             "samples_per_pixel": aa.samples_per_pixel,
-            "lod_divisor": aa.divisor,
+            "lod_divisor": aa.divisor(settings.msaa_lod),
             "threshold": [tu, tv],
             "tess": {"mode": settings.mode, "spacing": settings.spacing, "levels": list(settings.levels),
                      "base_level": settings.base_level, "l_min": settings.l_min, "l_max": settings.l_max,
@@ -562,7 +576,7 @@ def render_tess(scene: Scene, camera: Camera, settings: TessSettings | None = No
     lod_stage = lod_stage or r.lod
     tess = r.tess_renderer()
     _, aa, _ = tess.effective_aa(settings.aa)
-    div = aa.divisor
+    div = aa.divisor(settings.msaa_lod)
     dev = r.upload(scene, camera)
     inst, count, domains, cam = dev["inst"], dev["count"], dev["domains"], dev["cam"]
     t1 = time.perf_counter()

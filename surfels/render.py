@@ -21,6 +21,9 @@ from .errors import SurfelError
 from .format import SurfelSet, load_surfels
 
 LOCAL = 64
+# IEEE float division and sqrt, as numpy does: the splat kernel's coverage and depth keys must match
+# its numpy twin bit for bit, and NVIDIA's default division is not correctly rounded
+EXACT_DIVISION = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 COUNTERS = ("surfels_drawn", "atomics", "pixels_covered", "surfels_not_finite")
 
 
@@ -190,7 +193,7 @@ def draw_surfels(keys, camera, surfels, strategy=None, transform=None, object_id
     n = choice["prefix"]
     radius_view = np.float32(choice["radius"] * _scale(transform))
     t0 = time.perf_counter()
-    kernel("surfels_splat", ["keys.cl", "surfels_splat.cl"])(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view,
+    kernel("surfels_splat", ["keys.cl", "surfels_splat.cl"], options=EXACT_DIVISION)(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view,
                   *small, np.float32(specular), np.uint32(object_id), keys.color, keys.aux, cbuf)
     cl.enqueue_copy(q, counters, cbuf)
     q.finish()
