@@ -140,13 +140,33 @@ def cl_info() -> dict:
     }
 
 
+GL_MAX_TESS_GEN_LEVEL = 0x8E7E
+
+
+def _gl_integer(name: int) -> int | None:
+    """glGetIntegerv of a limit that moderngl's info dict lacks (the context is current)."""
+    import ctypes
+
+    for lib in ("libOpenGL.so.0", "libGL.so.1"):
+        try:
+            gl = ctypes.CDLL(lib)
+            break
+        except OSError:
+            continue
+    else:
+        return None
+    value = ctypes.c_int(0)
+    gl.glGetIntegerv(ctypes.c_uint(name), ctypes.byref(value))
+    return value.value or None
+
+
 def gl_info() -> dict:
     ctx = gl_context()
     return {
         "renderer": ctx.info["GL_RENDERER"],
         "vendor": ctx.info["GL_VENDOR"],
         "version": ctx.info["GL_VERSION"],
-        "max_tess_gen_level": ctx.info.get("GL_MAX_TESS_GEN_LEVEL"),
+        "max_tess_gen_level": _gl_integer(GL_MAX_TESS_GEN_LEVEL),
         "max_samples": ctx.info.get("GL_MAX_SAMPLES"),
     }
 

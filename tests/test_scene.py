@@ -106,6 +106,14 @@ def test_cli_errors_are_messages_not_tracebacks(tmp_path, capsys):
     assert not list(tmp_path.glob(".x.*"))  # no temporary files left behind
 
 
+def test_info_reports_the_gl_limits_tessellation_needs():
+    from paramlod.device import gl_info
+
+    info = gl_info()
+    # GL 4.x guarantees level 64; the renderers rely on it (tess.MAX_LEVEL)
+    assert info["max_tess_gen_level"] >= 64 and info["max_samples"] >= 1
+
+
 def test_unusable_device_lists_devices(monkeypatch):
     r = subprocess.run([sys.executable, "-m", "paramlod", "--cl-device", "no-such-gpu", "info"],
                        capture_output=True, text=True)
