@@ -182,20 +182,27 @@ def check_printable(fn: ParametricFunction) -> None:
         _print_checked(_printer, e, fn)
 
 
-def _snippet_source(fn: ParametricFunction, index: int) -> str:
+def snippet_body(fn: ParametricFunction, scalar_load: str) -> str:
+    """A snippet function's body (shared by the OpenCL and GLSL backends): its parameters as
+    locals (scalars loaded with ``scalar_load.format(offset)``, arrays as their offset), then the
+    user's code."""
     offs = fn.param_offsets()
     loads = []
     for p in fn.params:
         if p.is_array:
             loads.append(f"    const int {p.name} = {offs[p.name]};  // array: PARAM_AT({p.name}, i)")
         else:
-            loads.append(f"    const float {p.name} = P[{offs[p.name]}];")
-    hu, hv = fn.snippet.fd_step
-    snip = (f"inline float3 pl_snip_{index}(float u, float v, __global const float* P) {{\n"
-            + "\n".join(loads) + ("\n" if loads else "")
+            loads.append(f"    const float {p.name} = {scalar_load.format(offs[p.name])};")
+    return ("\n".join(loads) + ("\n" if loads else "")
             + "    // --- snippet ---\n"
             + "\n".join("    " + line for line in fn.snippet.code.strip("\n").splitlines())
             + "\n}\n")
+
+
+def _snippet_source(fn: ParametricFunction, index: int) -> str:
+    hu, hv = fn.snippet.fd_step
+    snip = (f"inline float3 pl_snip_{index}(float u, float v, __global const float* P) {{\n"
+            + snippet_body(fn, "P[{}]"))
     pos = (f"inline float3 pl_pos_{index}(float u, float v, __global const float* P) {{\n"
            f"    return pl_snip_{index}(u, v, P);\n}}\n")
     # normals of snippet functions: central differences with the function's fd_step

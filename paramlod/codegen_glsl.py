@@ -21,7 +21,7 @@ import math
 from sympy.printing.c import known_functions_C99
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
-from .codegen import CLPrinter, function_body, param_lines
+from .codegen import CLPrinter, function_body, param_lines, snippet_body
 from .errors import FunctionError
 from .function import ParametricFunction
 
@@ -91,19 +91,8 @@ def glsl_expr(expr) -> str:
 
 
 def _snippet_source(fn: ParametricFunction, index: int, position: bool, surface: bool) -> str:
-    offs = fn.param_offsets()
-    loads = []
-    for p in fn.params:
-        if p.is_array:
-            loads.append(f"    const int {p.name} = {offs[p.name]};  // array: PARAM_AT({p.name}, i)")
-        else:
-            loads.append(f"    const float {p.name} = PARAM({offs[p.name]});")
     hu, hv = fn.snippet.fd_step
-    snip = (f"vec3 pl_snip_{index}(float u, float v, uint P) {{\n"
-            + "\n".join(loads) + ("\n" if loads else "")
-            + "    // --- snippet ---\n"
-            + "\n".join("    " + line for line in fn.snippet.code.strip("\n").splitlines())
-            + "\n}\n")
+    snip = f"vec3 pl_snip_{index}(float u, float v, uint P) {{\n" + snippet_body(fn, "PARAM({})")
     pos = f"vec3 pl_pos_{index}(float u, float v, uint P) {{\n    return pl_snip_{index}(u, v, P);\n}}\n"
     surf = (f"void pl_surf_{index}(float u, float v, uint P, out vec3 pos, out vec3 du, out vec3 dv) {{\n"
             f"    const float hu = {glsl_literal(hu)}, hv = {glsl_literal(hv)};\n"

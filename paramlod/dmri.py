@@ -132,12 +132,11 @@ def cart_to_angles(xyz) -> tuple[np.ndarray, np.ndarray]:
 
 def _dipy():
     try:
-        import dipy.reconst.shm as shm  # noqa: F401
-        import nibabel  # noqa: F401
+        import dipy.reconst.shm as shm
+        import nibabel  # noqa: F401  (checked here so the message names both)
     except ImportError as e:
         raise DmriError("diffusion-MRI support needs dipy and nibabel: pip install 'paramlod[dmri]' "
                         f"({e})") from None
-    import dipy.reconst.shm as shm
     return shm
 
 

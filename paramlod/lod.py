@@ -87,14 +87,12 @@ class LodStage:
         # work-groups per step (they stride over the patches): enough to fill the device
         self.max_groups = dev.device.max_compute_units * (64 if dev.is_gpu else 16)
 
-    def run(self, inst, n_instances, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
+    def run(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
         """Returns (render buffer, render patch count, per-step stats list, ms).
 
         All steps are enqueued at once and the counters read back once; if a buffer overflowed,
         the buffers grow and the whole stage is redone (growth persists across frames).
         """
-        if len(domains) != n_instances:
-            raise ValueError(f"LodStage.run: {len(domains)} domains for {n_instances} instances")
         t0 = time.perf_counter()
         while True:
             self.enqueue(inst, domains, cam_buf, settings, t_div)

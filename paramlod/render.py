@@ -78,7 +78,6 @@ class Renderer:
                 "materials": cla.to_device(q, scene.materials()).data,
                 "light": cla.to_device(q, LIGHT).data,
                 "domains": inst_f[:, 28:32],
-                "count": len(inst_f),
             }
             self._scene_key = key
         if self._cam_buf is None:
@@ -99,11 +98,11 @@ class Renderer:
         dev = self.upload(scene, camera)
         t_upload = time.perf_counter()
         host = 0.0   # Python time spent enqueueing (the rest of the frame is waiting)
+        direct = self.lod is not None and variant == "points"
         while True:
             t1 = time.perf_counter()
             self.keys.clear()
-            n_render, steps, counters = 0, [], {k: 0 for k in COUNTERS}
-            if self.lod is not None and variant == "points":
+            if direct:
                 self.lod.enqueue(dev["inst"], dev["domains"], dev["cam"], settings.lod)
                 self.points.enqueue(self.lod.render.buf, self.lod.counters, LOD_RENDER_TOTAL,
                                     self.lod.render.capacity, dev["inst"], dev["materials"], dev["cam"],
@@ -125,24 +124,25 @@ class Renderer:
             surfel_stats = self.draw_surfels(scene, camera)
             resolved = self.keys.resolve_on_device()
             host += time.perf_counter() - t1
-            if self.lod is not None and variant == "points":
+            if direct:
                 self.lod.read_counters()   # the frame's one wait
             resolved.wait()
-            if self.lod is None:
+            if not (direct and self.lod.grow(settings.lod)):
                 break
-            if not self.lod.grow(settings.lod):
-                n_render, steps = self.lod.result()
-                if variant == "points":
-                    counters = self.points.counts()
-                break
+        n_render, steps, render_ms = 0, [], 0.0
+        if direct:
+            counters, render_ms = self.points.counts(), _event_ms(self.points.event)
+        elif self.lod is not None:
+            render_ms = ssaa_ms
+        else:
+            counters = {k: 0 for k in COUNTERS}
+        if self.lod is not None:
+            n_render, steps = self.lod.result()
         t4 = time.perf_counter()
         frame = self.keys.read_frame()
         t5 = time.perf_counter()
         written = int(np.count_nonzero(np.isfinite(frame.depth)))
         lod_ms = self.lod.device_ms() if self.lod is not None else 0.0
-        render_ms = 0.0
-        if self.lod is not None:
-            render_ms = _event_ms(self.points.event) if variant == "points" else ssaa_ms
         frame.stats = {
             "device": cl_device().name,
             "variant": variant,

@@ -578,9 +578,9 @@ def render_tess(scene: Scene, camera: Camera, settings: TessSettings | None = No
     _, aa, _ = tess.effective_aa(settings.aa)
     div = aa.divisor(settings.msaa_lod)
     dev = r.upload(scene, camera)
-    inst, count, domains, cam = dev["inst"], dev["count"], dev["domains"], dev["cam"]
+    inst, domains, cam = dev["inst"], dev["domains"], dev["cam"]
     t1 = time.perf_counter()
-    _, n, steps, lod_ms = lod_stage.run(inst, count, domains, cam, lod_settings, t_div=div)
+    _, n, steps, lod_ms = lod_stage.run(inst, domains, cam, lod_settings, t_div=div)
     t2 = time.perf_counter()
     records = lod_stage.read_render_list(n)
     t3 = time.perf_counter()

@@ -36,3 +36,37 @@ def sphere_scene():
     s = pl.Scene()
     s.add("sphere")
     return s
+
+
+def record_direct_points(settings, size):
+    """A sphere and a torus drawn by the direct point renderer with its recording test hook.
+    Returns (stats, colour keys flattened, each sample's pixel (~0 when dropped), each sample's
+    colour key, the sample count the numpy twin of the sample counts predicts)."""
+    import pyopencl.array as cla
+
+    from paramlod.device import cl_device
+    from paramlod.framebuffer import KeyBuffer
+    from paramlod.points import DirectPointRenderer, grid_counts
+    from paramlod.render import renderer_for
+
+    scene = pl.Scene()
+    scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
+    scene.add("torus", transform=pl.translate(0.8, 0.2, 0.3) @ pl.rotate(70, (1, 0, 0)))
+    cam = pl.Camera.look_at((0.5, 0.8, 3.5), (0.3, 0, 0), size=size)
+    r = renderer_for(scene)
+    dev = r.upload(scene, cam)
+    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings())
+    nu, nv = grid_counts(r.lod.read_render_list(n), settings)
+    counts = nu * nv
+    total = int(counts.sum())
+    q = cl_device().queue
+    rec = DirectPointRenderer(scene.functions(), record=True)
+    off = cla.to_device(q, np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32))
+    pix = cla.empty(q, total, np.uint32)
+    key = cla.empty(q, total, np.uint64)
+    keys = KeyBuffer(*cam.size)
+    keys.clear()
+    stats = rec.draw(rbuf, n, dev["inst"], dev["materials"], dev["cam"], dev["light"], keys, settings,
+                     record_args=(off.data, pix.data, key.data))
+    color, _ = keys.read_keys()
+    return stats, color.reshape(-1), pix.get(), key.get(), total

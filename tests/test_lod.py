@@ -20,7 +20,7 @@ def cl_render_list(scene, camera, lod=None):
     lod = lod or pl.LodSettings()
     r = renderer_for(scene)
     dev = r.upload(scene, camera)
-    _, n, steps, _ = r.lod.run(dev["inst"], dev["count"], dev["domains"], dev["cam"], lod)
+    _, n, steps, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], lod)
     return r.lod.read_render_list(n), steps
 
 

@@ -4,46 +4,18 @@ import pytest
 import sympy as sp
 
 import paramlod as pl
-from paramlod.device import cl_device
-from paramlod.framebuffer import KeyBuffer
-from paramlod.points import DirectPointRenderer, side_counts
-from paramlod.render import renderer_for
 
-from conftest import iou, sphere_disc
+from conftest import iou, record_direct_points, sphere_disc
 
 
 def test_key_buffer_equals_minimum_at_over_the_same_samples():
-    import pyopencl.array as cla
-
-    scene = pl.Scene()
-    scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
-    scene.add("torus", transform=pl.translate(0.8, 0.2, 0.3) @ pl.rotate(70, (1, 0, 0)))
-    cam = pl.Camera.look_at((0.5, 0.8, 3.5), (0.3, 0, 0), size=(96, 80))
-    r = renderer_for(scene)
-    dev = r.upload(scene, cam)
-    settings = pl.RenderSettings()
-    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["count"], dev["domains"], dev["cam"], settings.lod)
-    rp = r.lod.read_render_list(n)
-    counts = side_counts(rp["ext"][:, 2], settings.points) * side_counts(rp["ext"][:, 3], settings.points)
-    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32)
-    total = int(counts.sum())
-    q = cl_device().queue
-    rec = DirectPointRenderer(scene.functions(), record=True)
-    off_d = cla.to_device(q, offsets)
-    pix_d = cla.empty(q, total, np.uint32)
-    key_d = cla.empty(q, total, np.uint64)
-    keys = KeyBuffer(*cam.size)
-    keys.clear()
-    stats = rec.draw(rbuf, n, dev["inst"], dev["materials"], dev["cam"], dev["light"], keys,
-                     settings.points, record_args=(off_d.data, pix_d.data, key_d.data))
-    color, _ = keys.read_keys()
-    pix, key = pix_d.get(), key_d.get()
+    stats, color, pix, key, total = record_direct_points(pl.PointSettings(), (96, 80))
     assert stats["samples"] == total
     kept = pix != 0xFFFFFFFF
     assert kept.sum() > 1000
-    expect = np.full(cam.size[0] * cam.size[1], np.iinfo(np.uint64).max, np.uint64)
+    expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
     np.minimum.at(expect, pix[kept], key[kept])
-    np.testing.assert_array_equal(color.reshape(-1), expect)
+    np.testing.assert_array_equal(color, expect)
 
 
 @pytest.mark.parametrize("dist", [2.2, 2.6, 9.0])

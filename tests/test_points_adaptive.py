@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 import paramlod as pl
-from paramlod.device import cl_device
-from paramlod.framebuffer import KeyBuffer
 from paramlod.frame import Frame
-from paramlod.points import DirectPointRenderer, PointSettings, count_holes, grid_counts, side_counts
+from paramlod.points import PointSettings, count_holes, grid_counts, side_counts
 from paramlod.registry import get_function
-from paramlod.render import RenderSettings, renderer_for
+from paramlod.render import RenderSettings
+
+from conftest import record_direct_points
 
 # the shapes of the no-holes tests: (function, transform); the heart is Johi's heart
 SHAPES = {
@@ -96,35 +96,12 @@ def test_factor_and_side_counts_twin():
     PointSettings(oversample=1.5, density=1.0),
 ], ids=["extent", "extent-os2-eps", "segment-os1.5"])
 def test_key_buffer_equals_minimum_at_with_adaptive_options(settings):
-    import pyopencl.array as cla
-
-    scene = pl.Scene()
-    scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
-    scene.add("torus", transform=pl.translate(0.8, 0.2, 0.3) @ pl.rotate(70, (1, 0, 0)))
-    cam = pl.Camera.look_at((0.5, 0.8, 3.5), (0.3, 0, 0), size=(80, 64))
-    r = renderer_for(scene)
-    dev = r.upload(scene, cam)
-    rs = RenderSettings()
-    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["count"], dev["domains"], dev["cam"], rs.lod)
-    nu, nv = grid_counts(r.lod.read_render_list(n), settings)
-    counts = nu * nv
-    total = int(counts.sum())
-    q = cl_device().queue
-    rec = DirectPointRenderer(scene.functions(), record=True)
-    off = cla.to_device(q, np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32))
-    pix = cla.empty(q, total, np.uint32)
-    key = cla.empty(q, total, np.uint64)
-    keys = KeyBuffer(*cam.size)
-    keys.clear()
-    stats = rec.draw(rbuf, n, dev["inst"], dev["materials"], dev["cam"], dev["light"], keys, settings,
-                     record_args=(off.data, pix.data, key.data))
-    color, _ = keys.read_keys()
-    pix, key = pix.get(), key.get()
+    stats, color, pix, key, total = record_direct_points(settings, (80, 64))
     assert stats["samples"] == total
     kept = pix != 0xFFFFFFFF
-    expect = np.full(cam.size[0] * cam.size[1], np.iinfo(np.uint64).max, np.uint64)
+    expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
     np.minimum.at(expect, pix[kept], key[kept])
-    np.testing.assert_array_equal(color.reshape(-1), expect)
+    np.testing.assert_array_equal(color, expect)
     assert 0 < stats["atomics"] <= kept.sum()
 
 

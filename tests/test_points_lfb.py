@@ -33,7 +33,7 @@ class Setup:
         self.cam_buf = cla.to_device(q, camera_record(cam)).data
         self.light = cla.to_device(q, LIGHT).data
         self.stage = LodStage(self.funcs)
-        self.rbuf, self.n, _, _ = self.stage.run(self.inst, len(inst_f), inst_f[:, 28:32], self.cam_buf,
+        self.rbuf, self.n, _, _ = self.stage.run(self.inst, inst_f[:, 28:32], self.cam_buf,
                                                  lod or LodSettings(), t_div=settings.lod_divisor)
         self.render_list = self.stage.read_render_list(self.n)
 
