@@ -72,7 +72,7 @@ def atomics_ceiling(width, height, repeats=5) -> float:
 def tess_ceiling(size, level=64, repeats=3) -> dict:
     """Triangles/s of hardware tessellation of a trivial function (a sphere) at a fixed level."""
     from .lod import LodSettings
-    from .render import RenderSettings, render
+    from .render import RenderSettings, render, renderer_for
     from .scene import Scene
     from .tess import TessSettings
 
@@ -132,7 +132,7 @@ def _device_buffers_mib(scene, size) -> float:
 
 def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size):
     from .programs import start_timing, stop_timing
-    from .render import RenderSettings, render
+    from .render import RenderSettings, render, renderer_for
 
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
@@ -140,17 +140,21 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
     rs.tess.l_min = l_min
     if aa:
         rs.tess.aa = aa
+    # the point variants run frame after frame without copying each to the host, as an
+    # interactive viewer does (an 80 MB read-back between frames also evicts the host's caches
+    # and slowed the next frame's Python by half); one more frame, read back, gives the pixel
+    # statistics and the read-back time
+    on_device = None if variant == "tess" else renderer_for(scene).render_on_device
     rows = []
     for k in range(args.warmup + args.frames):
         cam = _orbit(base, centre, dist, k, args.frames, size)
         start_timing()
-        t0 = time.perf_counter()
-        f = render(scene, cam, variant, rs)
-        wall = (time.perf_counter() - t0) * 1e3
+        stats = on_device(scene, cam, rs, variant) if on_device else render(scene, cam, variant, rs).stats
         kernel_ms = stop_timing()
         if k >= args.warmup:
-            rows.append((f.stats, wall, kernel_ms))
+            rows.append((stats, kernel_ms))
     st = [r[0] for r in rows]
+    pixels = render(scene, cam, variant, rs).stats if on_device else None
     frame = [_frame_ms(s["ms"]) for s in st]
     med = statistics.median
     out = {
@@ -158,12 +162,9 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         "frame_ms": med(frame), "frame_ms_p95": float(np.percentile(frame, 95)),
         "lod_ms": med(s["ms"].get("lod", 0.0) for s in st),
         "render_ms": med(s["ms"].get("render", s["ms"].get("draw", 0.0)) for s in st),
-        "readback_ms": med(s["ms"].get("readback", 0.0) for s in st),
-        "cl_kernel_ms": med(r[2] for r in rows),
+        "cl_kernel_ms": med(r[1] for r in rows),
         "render_patches": med(s.get("render_patches", 0) for s in st),
         "lod_steps_in": [med(s["lod_steps"][i]["in"] for s in st) for i in range(len(st[0].get("lod_steps", [])))],
-        "pixels_written": med(s.get("pixels_written", 0) for s in st),
-        "overdraw": med(s.get("overdraw", 0.0) for s in st),
         "samples": med(s.get("samples", 0) for s in st),
         "atomics": med(s.get("atomics", 0) for s in st),
         "device_buffers_mib": _device_buffers_mib(scene, size),
@@ -174,10 +175,16 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         out["aa_effective"] = st[0].get("aa_effective")
         out["triangles"] = med(s.get("triangles", 0) for s in st)
         out["host_ms"] = None   # GL work is not timed by OpenCL events
+        out.update(pixels_written=med(s.get("pixels_written", 0) for s in st),
+                   overdraw=med(s.get("overdraw", 0.0) for s in st),
+                   readback_ms=med(s["ms"].get("readback", 0.0) for s in st))
     else:
         # host: Python time preparing and enqueueing the frame (it overlaps the device's work);
         # idle: the part of the frame not covered by OpenCL kernels (launch gaps, waits, transfers)
         out["host_ms"] = med(s["ms"]["host"] for s in st)
+        # pixel statistics and read-back time of the extra frame read back
+        out.update(pixels_written=pixels["pixels_written"], overdraw=pixels["overdraw"],
+                   readback_ms=pixels["ms"]["readback"])
         out["idle_ms"] = max(0.0, out["frame_ms"] - out["cl_kernel_ms"])
     out["fps"] = 1e3 / out["frame_ms"] if out["frame_ms"] > 0 else float("inf")
     return out

@@ -9,7 +9,7 @@ import numpy as np
 
 from .device import cl_device
 from .frame import Frame
-from .programs import kernel
+from .programs import build, launch
 
 
 class KeyBuffer:
@@ -22,7 +22,9 @@ class KeyBuffer:
         self.color = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self.aux = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self._out = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4)]
-        self._resolve = kernel("resolve", ["keys.cl", "resolve.cl"])
+        # this buffer's own kernel object, its arguments set once
+        self._resolve = cl.Kernel(build(["keys.cl", "resolve.cl"]), "resolve")
+        self._resolve.set_args(self.color, self.aux, np.uint32(n), *self._out)
 
     @property
     def pixel_count(self) -> int:
@@ -56,8 +58,7 @@ class KeyBuffer:
         """Decode the keys into colour, depth, normal and id buffers on the device (enqueued;
         returns the kernel's event)."""
         n = self.pixel_count
-        return self._resolve(cl_device().queue, ((n + 255) // 256 * 256,), None, self.color, self.aux,
-                      np.uint32(n), *self._out)
+        return launch(cl_device().queue, self._resolve, ((n + 255) // 256 * 256,))
 
     def read_frame(self) -> Frame:
         """Copy the resolved buffers to the host as a Frame (after resolve_on_device())."""

@@ -81,7 +81,9 @@ class LodStage:
         self._start = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, 16 * LOD_COUNTERS * 4)
         self._start_n = None
         self._counts = np.zeros((16, LOD_COUNTERS), np.uint32)  # read back after it
-        self._steps_n = 0
+        self._max_steps = 0   # the settings' max_steps of the enqueued stage
+        self._steps_n = 0     # steps enqueued: the previous stage's depth plus one (see enqueue)
+        self._depth = None    # the last step that had input patches in the previous stage
         self.events = []   # the last enqueued stage's kernel events (device timing)
         dev = cl_device()
         # work-groups per step (they stride over the patches): enough to fill the device
@@ -105,8 +107,13 @@ class LodStage:
     def enqueue(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
         """Enqueue the whole stage without waiting: the render list lands in ``self.render.buf``
         and its length in ``self.counters[LOD_RENDER_TOTAL]`` on the device, for a renderer that
-        reads the count there. Then ``read_counters`` (waits), ``grow`` (True: a buffer overflowed
-        and grew, enqueue the frame again) and ``result``."""
+        reads the count there. Then ``read_counters`` (waits), ``grow`` (True: enqueue the frame
+        again) and ``result``.
+
+        Only the steps the previous stage needed plus one are enqueued (a view changes little
+        between frames, and each step is a launch of Python and device time); if the last of them
+        still splits patches, ``grow`` asks for the stage again with all ``max_steps`` steps. Only
+        step ``max_steps`` forces its patches out, so nothing is rendered too coarse meanwhile."""
         import pyopencl as cl
 
         settings.validate()
@@ -122,18 +129,20 @@ class LodStage:
             self._init_for = (domains, tuple(settings.initial_grid), n_init)
         for b in self.bufs:
             b.ensure(n_init)
-        steps_n = self._steps_n = settings.max_steps
+        max_steps = self._max_steps = settings.max_steps
+        depth = self._depth
+        steps_n = self._steps_n = max_steps if depth is None else min(max_steps, depth + 1)
         tu, tv = (np.float32(t / t_div) for t in settings.threshold)
         cap = min(b.capacity for b in self.bufs)
         # the buffers themselves, not their ids: held here, they cannot be freed and their ids reused
-        bound = (*inst, cam_buf, float(tu), float(tv), steps_n, cap,
+        bound = (*inst, cam_buf, float(tu), float(tv), max_steps, cap,
                  *(b.buf for b in (self.init, *self.bufs, self.render)))
         if bound != self._bound:
-            for step, k in enumerate(self._step_kernels[:steps_n], start=1):
+            for step, k in enumerate(self._step_kernels[:max_steps], start=1):
                 src = self.init if step == 1 else self.bufs[(step - 1) % 2]
                 k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf,
                            np.uint32(self.render.capacity), self.counters, *inst, cam_buf, tu, tv,
-                           np.uint32(step), np.uint32(step == steps_n))
+                           np.uint32(step), np.uint32(step == max_steps))
             self._bound = bound
         if self._start_n != n_init:
             start = np.zeros((16, LOD_COUNTERS), np.uint32)
@@ -152,11 +161,18 @@ class LodStage:
         cl.enqueue_copy(cl_device().queue, self._counts, self.counters)
 
     def grow(self, settings: LodSettings) -> bool:
-        """After the stage's read-back: grow the buffers that overflowed; True if any did."""
+        """After the stage's read-back: grow the buffers that overflowed, or the step count if
+        the last enqueued step split patches; True if the stage must be enqueued again."""
         counts = self._counts
-        need = int(counts[1:self._steps_n + 1, C_CHILDREN].max(initial=0))
+        n = self._steps_n
+        need = int(counts[1:n + 1, C_CHILDREN].max(initial=0))
         n_render = int(counts[0, LOD_RENDER_TOTAL])
         grew = False
+        if n < self._max_steps and counts[n, C_CHILDREN]:
+            self._depth, grew = None, True   # too few steps: the next stage runs all of them
+        else:
+            fed = np.flatnonzero(counts[:n, C_CHILDREN])   # fed[i] + 1: a step that had input
+            self._depth = int(fed[-1]) + 1 if fed.size else 1
         if need > min(b.capacity for b in self.bufs):
             self._check(need, settings, "patches in one LOD step")
             for b in self.bufs:
@@ -171,7 +187,7 @@ class LodStage:
         counts = self._counts
         steps = []
         n_in = int(counts[0, C_CHILDREN])
-        for step in range(1, self._steps_n + 1):
+        for step in range(1, self._max_steps + 1):   # steps not enqueued had no input: zeros
             c = counts[step]
             steps.append({"step": step, "in": n_in, "split": int(c[C_SPLIT]), "culled": int(c[C_CULLED]),
                           "out": int(c[C_RENDERED]), "forced": int(c[C_FORCED])})

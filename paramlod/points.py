@@ -13,7 +13,7 @@ import numpy as np
 
 from .device import cl_device
 from .errors import SceneError
-from .programs import kernel
+from .programs import build, launch
 
 LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
@@ -104,14 +104,20 @@ class DirectPointRenderer:
         defines = {"PL_RECORD": 1} if record else {}
         if cl_device().is_gpu:   # sum the counters per work-group (see the end of points_direct)
             defines["PL_GROUP_COUNTERS"] = 1
-        self.kernel = kernel("points_direct", ["keys.cl", "points.cl"], functions, defines)
+        prog = build(["keys.cl", "points.cl"], functions, defines)
+        # own kernel objects: arguments are set only when they change (see enqueue)
+        self.schedule = cl.Kernel(prog, "points_schedule")
+        self.kernel = cl.Kernel(prog, "points_direct")
+        self._bound = None
         self.record = record
         dev = cl_device()
-        self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * len(COUNTERS))
+        # COUNTERS, then the schedule's counter (kernels/points.cl, SCHED_AT)
+        self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * (len(COUNTERS) + 1))
         self._count = cl.Buffer(dev.context, cl.mem_flags.READ_ONLY, 4)   # a host-given patch count
         self._counts = np.zeros(len(COUNTERS), np.uint64)
-        self.event = None
-        # work-groups stride over the patches: about one resident wave on a GPU
+        self._order, self._order_cap = None, 0   # the schedule: 8 bytes a patch
+        self.events = ()
+        # work-groups share the samples evenly: about one resident wave on a GPU
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
@@ -122,13 +128,30 @@ class DirectPointRenderer:
 
         settings.validate()
         q = cl_device().queue
-        cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * len(COUNTERS))
-        groups = max(1, min(int(capacity), self.max_groups))
-        self.event = self.kernel(q, (groups * LOCAL_SIZE,), (LOCAL_SIZE,),
-                                 patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity),
-                                 *inst, materials_buf, cam_buf, light_buf,
-                                 settings.factor(), np.uint32(settings.use_extent), np.float32(settings.widen),
-                                 np.uint32(settings.max_side), keys.color, keys.aux, self.counters, *record_args)
+        capacity = max(int(capacity), 1)
+        if capacity > self._order_cap:
+            self._order = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8 * capacity)
+            self._order_cap = capacity
+        cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
+        sampling = (settings.factor(), np.uint32(settings.use_extent))
+        args = (patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), self._order,
+                *inst, materials_buf, cam_buf, light_buf, *sampling, np.float32(settings.widen),
+                np.uint32(settings.max_side), keys.color, keys.aux, self.counters, *record_args)
+        # the same buffers and values frame after frame: converting ~20 arguments each time was a
+        # measurable share of a frame's Python time
+        if args != self._bound:
+            self.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), *sampling,
+                                   np.uint32(settings.max_side), self._order, self.counters)
+            self.kernel.set_args(*args)
+            self._bound = args
+        items = min(-(-capacity // LOCAL_SIZE), self.max_groups) * LOCAL_SIZE
+        self.events = (launch(q, self.schedule, (items,), (LOCAL_SIZE,)),
+                       launch(q, self.kernel, (self.max_groups * LOCAL_SIZE,), (LOCAL_SIZE,)))
+
+    def device_ms(self) -> float:
+        """Device time of the last render (schedule and samples; after its wait)."""
+        first, last = self.events
+        return (last.profile.end - first.profile.start) * 1e-6
 
     def counts(self) -> dict:
         """Wait for the last render and return its counters (COUNTERS)."""

@@ -91,9 +91,25 @@ class Renderer:
         return dev
 
     def render(self, scene: Scene, camera: Camera, settings: RenderSettings, variant: str = "points"):
-        """One frame. The direct point variant enqueues the whole frame (LOD stage, render,
-        resolve) and waits once at its end: the renderer reads the patch count on the device.
-        If a LOD buffer overflowed, it grew and the frame is enqueued again."""
+        """One frame, copied to the host as a Frame (``render_on_device`` plus the read-back)."""
+        stats = self.render_on_device(scene, camera, settings, variant)
+        t0 = time.perf_counter()
+        frame = self.keys.read_frame()
+        readback = (time.perf_counter() - t0) * 1e3
+        written = int(np.count_nonzero(np.isfinite(frame.depth)))
+        stats["pixels_written"] = written
+        stats["overdraw"] = stats["atomics"] / written if written else 0.0
+        stats["ms"].update(readback=readback, total=stats["ms"]["frame"] + readback)
+        frame.stats = stats
+        frame.background = scene.background
+        return frame
+
+    def render_on_device(self, scene: Scene, camera: Camera, settings: RenderSettings,
+                         variant: str = "points") -> dict:
+        """One frame up to the resolved buffers on the device (``self.keys``), what an interactive
+        viewer pays; returns its stats. The direct point variant enqueues the whole frame (LOD
+        stage, render, resolve) and waits once at its end: the renderer reads the patch count on
+        the device. If a LOD buffer overflowed, it grew and the frame is enqueued again."""
         t0 = time.perf_counter()
         dev = self.upload(scene, camera)
         t_upload = time.perf_counter()
@@ -131,7 +147,7 @@ class Renderer:
                 break
         n_render, steps, render_ms = 0, [], 0.0
         if direct:
-            counters, render_ms = self.points.counts(), _event_ms(self.points.event)
+            counters, render_ms = self.points.counts(), self.points.device_ms()
         elif self.lod is not None:
             render_ms = ssaa_ms
         else:
@@ -139,11 +155,8 @@ class Renderer:
         if self.lod is not None:
             n_render, steps = self.lod.result()
         t4 = time.perf_counter()
-        frame = self.keys.read_frame()
-        t5 = time.perf_counter()
-        written = int(np.count_nonzero(np.isfinite(frame.depth)))
         lod_ms = self.lod.device_ms() if self.lod is not None else 0.0
-        frame.stats = {
+        return {
             "device": cl_device().name,
             "variant": variant,
             "size": list(camera.size),
@@ -152,19 +165,15 @@ class Renderer:
             "forced_patches": sum(s["forced"] for s in steps),
             **counters,
             "surfels": surfel_stats,
-            "pixels_written": written,
-            "overdraw": counters["atomics"] / written if written else 0.0,
             # "frame" is the work of a frame up to resolved buffers on the device (what an
-            # interactive viewer pays); "readback" copies them to the host for the Frame.
+            # interactive viewer pays); render() adds "readback", the copy to the host.
             # "lod", "resolve" and the direct variant's "render" are device times of those
             # kernels (points-ssaa's "render" is wall time: it waits inside); "host" is the
             # Python time spent preparing and enqueueing the frame.
             "ms": {"upload": (t_upload - t0) * 1e3, "lod": lod_ms, "render": render_ms,
                    "resolve": _event_ms(resolved), "host": (t_upload - t0 + host) * 1e3,
-                   "frame": (t4 - t0) * 1e3, "readback": (t5 - t4) * 1e3, "total": (t5 - t0) * 1e3},
+                   "frame": (t4 - t0) * 1e3},
         }
-        frame.background = scene.background
-        return frame
 
     def draw_surfels(self, scene: Scene, camera: Camera) -> list[dict]:
         """Splat each surfel object's prefix into the same key buffer (composed by depth)."""

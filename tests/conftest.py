@@ -38,10 +38,14 @@ def sphere_scene():
     return s
 
 
+NOT_VISITED = 0xFFFFFFFE
+
+
 def record_direct_points(settings, size):
     """A sphere and a torus drawn by the direct point renderer with its recording test hook.
-    Returns (stats, colour keys flattened, each sample's pixel (~0 when dropped), each sample's
-    colour key, the sample count the numpy twin of the sample counts predicts)."""
+    Returns (stats, colour keys flattened, each sample's pixel (~0 when dropped, NOT_VISITED if
+    the renderer never reached it), each sample's colour key, the sample count the numpy twin of
+    the sample counts predicts)."""
     import pyopencl.array as cla
 
     from paramlod.device import cl_device
@@ -63,6 +67,7 @@ def record_direct_points(settings, size):
     rec = DirectPointRenderer(scene.functions(), record=True)
     off = cla.to_device(q, np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32))
     pix = cla.empty(q, total, np.uint32)
+    pix.fill(NOT_VISITED)
     key = cla.empty(q, total, np.uint64)
     keys = KeyBuffer(*cam.size)
     keys.clear()

@@ -49,6 +49,27 @@ def test_cl_lod_matches_numpy_reference(fname, eye, target):
     np.testing.assert_allclose(gext, rext, rtol=1e-3, atol=1e-3)
 
 
+def test_stage_follows_the_view_from_far_to_near_and_back():
+    """A stage enqueues only the steps the previous one needed, plus one: zooming in past that
+    must redo the stage with all steps, never force patches out early."""
+    scene = pl.Scene()
+    scene.add("torus")
+    lod = pl.LodSettings(threshold=(30.0, 30.0))
+    far = pl.Camera.look_at((0, 0, 40), (0, 0, 0), size=(320, 240))
+    near = pl.Camera.look_at((0, 0.3, 1.4), (0, 0, 0), size=(320, 240))
+    stage = renderer_for(scene).lod
+    depths = []
+    for cam in (far, near, near, far):
+        got, steps = cl_render_list(scene, cam, lod)
+        ref, ref_steps = run_lod(scene, camera_record(cam), lod)
+        assert steps == ref_steps
+        np.testing.assert_array_equal(canonical(got)[1], canonical(ref)[1])
+        assert not (got["flags"] & FLAG_FORCED).any()
+        depths.append(max(s["step"] for s in steps if s["in"]))
+    assert depths[0] + 2 <= depths[1]          # the near view needs more steps than far + 1
+    assert stage._steps_n == depths[1] + 1     # the last stage ran the near view's depth + 1 steps
+
+
 def test_render_patches_respect_thresholds_unless_forced():
     scene = pl.Scene()
     scene.add("torus")

@@ -5,12 +5,15 @@ import sympy as sp
 
 import paramlod as pl
 
-from conftest import iou, record_direct_points, sphere_disc
+from conftest import NOT_VISITED, iou, record_direct_points, sphere_disc
 
 
 def test_key_buffer_equals_minimum_at_over_the_same_samples():
     stats, color, pix, key, total = record_direct_points(pl.PointSettings(), (96, 80))
     assert stats["samples"] == total
+    # the work-groups' shares of the samples (kernels/points.cl, points_schedule) cover every
+    # sample of every patch once: none is left unvisited, and the count matches
+    assert not (pix == NOT_VISITED).any()
     kept = pix != 0xFFFFFFFF
     assert kept.sum() > 1000
     expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
