@@ -72,7 +72,7 @@ def atomics_ceiling(width, height, repeats=5) -> float:
 def tess_ceiling(size, level=64, repeats=3) -> dict:
     """Triangles/s of hardware tessellation of a trivial function (a sphere) at a fixed level."""
     from .lod import LodSettings
-    from .render import RenderSettings, render, renderer_for
+    from .render import RenderSettings, render
     from .scene import Scene
     from .tess import TessSettings
 
@@ -125,6 +125,7 @@ def _device_buffers_mib(scene, size) -> float:
     total = 0
     if r.lod is not None:
         total += sum(b.capacity * b.dtype.itemsize for b in (*r.lod.bufs, r.lod.render))
+        total += r.points.order_capacity * 8   # the point renderer's schedule
     w, h = size
     total += w * h * (16 + 40)   # key buffers + resolved outputs
     return total / 2 ** 20

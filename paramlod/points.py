@@ -115,7 +115,7 @@ class DirectPointRenderer:
         self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * (len(COUNTERS) + 1))
         self._count = cl.Buffer(dev.context, cl.mem_flags.READ_ONLY, 4)   # a host-given patch count
         self._counts = np.zeros(len(COUNTERS), np.uint64)
-        self._order, self._order_cap = None, 0   # the schedule: 8 bytes a patch
+        self._order, self.order_capacity = None, 0   # the schedule: 8 bytes a patch
         self.events = ()
         # work-groups share the samples evenly: about one resident wave on a GPU
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
@@ -129,9 +129,9 @@ class DirectPointRenderer:
         settings.validate()
         q = cl_device().queue
         capacity = max(int(capacity), 1)
-        if capacity > self._order_cap:
+        if capacity > self.order_capacity:
             self._order = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8 * capacity)
-            self._order_cap = capacity
+            self.order_capacity = capacity
         cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
         sampling = (settings.factor(), np.uint32(settings.use_extent))
         args = (patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), self._order,
