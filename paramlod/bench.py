@@ -142,9 +142,9 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
     if aa:
         rs.tess.aa = aa
     # the point variants run frame after frame without copying each to the host, as an
-    # interactive viewer does (an 80 MB read-back between frames also evicts the host's caches
-    # and slowed the next frame's Python by half); one more frame, read back, gives the pixel
-    # statistics and the read-back time
+    # interactive viewer does (a frame's 80 MB read-back at 1080p is no part of a viewer's frame,
+    # and the next frame's Python measured slower after it); one more frame, read back, gives
+    # the pixel statistics and the read-back time
     on_device = None if variant == "tess" else renderer_for(scene).render_on_device
     rows = []
     for k in range(args.warmup + args.frames):

@@ -83,7 +83,10 @@ class LodStage:
         self._counts = np.zeros((16, LOD_COUNTERS), np.uint32)  # read back after it
         self._max_steps = 0   # the settings' max_steps of the enqueued stage
         self._steps_n = 0     # steps enqueued: the previous stage's depth plus one (see enqueue)
-        self._depth = None    # the last step that had input patches in the previous stage
+        # per threshold (variants divide it differently): the last step that had input patches
+        # in the previous stage with it
+        self._depth: dict[tuple, int] = {}
+        self._depth_key = None
         self.events = []   # the last enqueued stage's kernel events (device timing)
         dev = cl_device()
         # work-groups per step (they stride over the patches): enough to fill the device
@@ -130,9 +133,10 @@ class LodStage:
         for b in self.bufs:
             b.ensure(n_init)
         max_steps = self._max_steps = settings.max_steps
-        depth = self._depth
-        steps_n = self._steps_n = max_steps if depth is None else min(max_steps, depth + 1)
         tu, tv = (np.float32(t / t_div) for t in settings.threshold)
+        self._depth_key = (float(tu), float(tv), max_steps)
+        depth = self._depth.get(self._depth_key)
+        steps_n = self._steps_n = max_steps if depth is None else min(max_steps, depth + 1)
         cap = min(b.capacity for b in self.bufs)
         # the buffers themselves, not their ids: held here, they cannot be freed and their ids reused
         bound = (*inst, cam_buf, float(tu), float(tv), max_steps, cap,
@@ -169,10 +173,11 @@ class LodStage:
         n_render = int(counts[0, LOD_RENDER_TOTAL])
         grew = False
         if n < self._max_steps and counts[n, C_CHILDREN]:
-            self._depth, grew = None, True   # too few steps: the next stage runs all of them
+            self._depth.pop(self._depth_key)   # too few steps: the next stage runs all of them
+            grew = True
         else:
             fed = np.flatnonzero(counts[:n, C_CHILDREN])   # fed[i] + 1: a step that had input
-            self._depth = int(fed[-1]) + 1 if fed.size else 1
+            self._depth[self._depth_key] = int(fed[-1]) + 1 if fed.size else 1
         if need > min(b.capacity for b in self.bufs):
             self._check(need, settings, "patches in one LOD step")
             for b in self.bufs:
