@@ -101,15 +101,20 @@ def test_glsl_matches_numpy(name):
     assert np.array_equal(np.isfinite(pos).all(-1), ok)
     # float32 on the device; roots such as |x|^(1/4) near 0 amplify rounding: 1e-3 of the size
     assert np.max(np.abs(pos[ok] - P[ok])) <= 1e-3 * size
-    # partials are compared where they are finite, bounded and stable: where a small step in
-    # (u, v) changes them a lot (|x|^(1/4) at x = 0 in the hearts) float32 may give inf * 0 = NaN
+    # partials are compared where the surface is regular: both finite, bounded and stable. Where
+    # a small step in (u, v) changes them a lot, or one of them is unbounded (|x|^(1/4) at x = 0 in
+    # the hearts, along v = pi), float32 may land on the singularity itself and give 0 * inf = NaN
+    # for the other one too (NVIDIA's sin(pi) is exactly 0, Mesa's is not)
     hu, hv = 1e-5 * (fn.u_range[1] - fn.u_range[0]), 1e-5 * (fn.v_range[1] - fn.v_range[0])
     _, DU2, DV2 = fn.surface(uu + hu, vv + hv)
-    for got, want, near in ((du, DU, DU2), (dv, DV, DV2)):
+    regular = np.ones(uu.shape, bool)
+    for want, near in ((DU, DU2), (DV, DV2)):
         tol = 1e-3 * (size + np.nanmax(np.abs(want[np.abs(want).max(-1) < 100 * size])))
-        fine = (np.isfinite(want).all(-1) & (np.abs(want).max(-1) < 100 * size)
-                & (np.abs(near - want).max(-1) < tol))
-        assert np.max(np.abs(got[fine] - want[fine])) <= 1e-3 * (size + np.abs(want[fine]).max())
+        regular &= (np.isfinite(want).all(-1) & (np.abs(want).max(-1) < 100 * size)
+                    & (np.abs(near - want).max(-1) < tol))
+    assert regular.mean() > 0.6   # 0.69-1 for the built-ins
+    for got, want in ((du, DU), (dv, DV)):
+        assert np.max(np.abs(got[regular] - want[regular])) <= 1e-3 * (size + np.abs(want[regular]).max())
 
 
 def test_function_without_glsl_form_is_named():
@@ -403,11 +408,15 @@ def test_mixed_scene_composites_by_depth():
     fp = pl.render(subs["points"], cam)
     ft = render_tess(subs["tess"], cam)
     assert set(np.unique(fp.object_id)) == {0, 1} and set(np.unique(ft.object_id)) == {0, 2}
-    assert np.array_equal(mixed.depth, np.minimum(fp.depth, ft.depth))
-    nearer_t = ft.depth < fp.depth
+    # not bit-equal on a GPU: there the render list's order changes from run to run, and where
+    # two patches tie in the depth buffer the first one drawn writes the linear depth
+    np.testing.assert_allclose(mixed.depth, np.minimum(fp.depth, ft.depth), rtol=1e-5)
+    with np.errstate(invalid="ignore"):
+        nearer_t = ft.depth < fp.depth * (1 - 1e-4)
+        nearer_p = fp.depth < ft.depth * (1 - 1e-4)
     assert nearer_t.sum() > 200 and (np.isfinite(fp.depth) & nearer_t).sum() > 100   # real overlap
     assert np.all(mixed.object_id[nearer_t] == 2)
-    assert np.all(mixed.object_id[fp.depth < ft.depth] == 1)
+    assert np.all(mixed.object_id[nearer_p] == 1)
     opaque = nearer_t & (ft.color[..., 3] == 1)
     assert np.allclose(mixed.color[opaque], ft.color[opaque], atol=1e-6)
     # the same scene drawn by one variant labels nearly every pixel the same way
