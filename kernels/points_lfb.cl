@@ -1,5 +1,6 @@
 // Point renderer, local-framebuffer variant (thesis section 5.5.5, "points-ssaa"). Built after
-// keys.cl and points.cl. Three kernels per frame (paramlod/points_lfb.py drives them):
+// keys.cl, points.cl and subsamples.cl (the per-pixel resolve). Three kernels per frame
+// (paramlod/points_lfb.py drives them):
 //   lfb_count  one work-item per render patch: the tiles its padded screen box touches, counted
 //              per tile (an exclusive scan of those counts, pyopencl.scan, gives each tile's slot)
 //   lfb_fill   one work-item per render patch: its id written into each touched tile's list
@@ -15,9 +16,6 @@
 #ifndef PL_TILE
 #define PL_TILE 16      // tile side in pixels (the thesis's choice; tests also use 8)
 #endif
-#ifndef PL_SS
-#define PL_SS 2         // subsamples per pixel side: 2 -> 32x32 local framebuffer, 3 -> 48x48
-#endif
 #ifndef PL_CHUNK
 #define PL_CHUNK 64     // patch records staged in local memory per pass over a tile's list
 #endif
@@ -26,7 +24,6 @@
 #endif
 #define LFB_SIDE (PL_TILE * PL_SS)
 #define LFB_SIZE (LFB_SIDE * LFB_SIDE)
-#define CLEAR_KEY 0xFFFFFFFFFFFFFFFFul
 
 // lfb_count / points_lfb counters (paramlod/points_lfb.py LFB_COUNTERS, same order).
 #define C_PAIRS 0        // (tile, patch) pairs
@@ -100,16 +97,6 @@ __kernel void lfb_fill(__global const int4* rects, uint n_patches, uint tiles_x,
             pairs[tile_offset[t] + atomic_inc(&tile_fill[t])] = pid;
         }
     }
-}
-
-// sRGB8 -> linear in fixed point through lin[256], and back through the 256 thresholds thr[]
-// (thr[i] = linear value of code i - 1/2): the largest i with thr[i] <= x. Integer only, so the
-// numpy reference matches bit for bit (tables: paramlod.points_reference.srgb_tables).
-inline uint encode_srgb8(uint x, __global const uint* thr) {
-    uint i = 0u;
-    for (uint step = 128u; step > 0u; step >>= 1)
-        if (thr[i + step] <= x) i += step;   // i + step <= 255 always
-    return i;
 }
 
 __kernel __attribute__((reqd_work_group_size(PL_LOCAL, 1, 1)))
@@ -252,26 +239,17 @@ void points_lfb(__global const RenderPatch* patches, __global const int4* rects,
     for (uint p = lid; p < PL_TILE * PL_TILE; p += PL_LOCAL) {
         uint px = (uint)tx * PL_TILE + p % PL_TILE, py = (uint)ty * PL_TILE + p / PL_TILE;
         if (px >= W || py >= H) continue;
-        uint cnt = 0u, r = 0u, g = 0u, b = 0u;
-        ulong kmin = CLEAR_KEY, amin = CLEAR_KEY;
+        ulong k[SS_COUNT], a[SS_COUNT];
         for (uint dy = 0; dy < PL_SS; ++dy) {
             for (uint dx = 0; dx < PL_SS; ++dx) {
                 uint li = ((p / PL_TILE) * PL_SS + dy) * LFB_SIDE + (p % PL_TILE) * PL_SS + dx;
-                ulong k = lc[li];
-                if (k == CLEAR_KEY) continue;   // only covered subsamples count
-                uint c = (uint)k;
-                cnt++;
-                r += lin[c >> 24]; g += lin[(c >> 16) & 255u]; b += lin[(c >> 8) & 255u];
-                kmin = min(kmin, k);
-                amin = min(amin, la[li]);
+                k[dy * PL_SS + dx] = lc[li];
+                a[dy * PL_SS + dx] = la[li];
             }
         }
+        ulong key, amin;
+        uint cnt = resolve_subsamples(k, a, lin, thr, &key, &amin);
         if (cnt == 0u) continue;
-        uint rnd = cnt >> 1;   // round to nearest
-        uint rgba = (encode_srgb8((r + rnd) / cnt, thr) << 24) | (encode_srgb8((g + rnd) / cnt, thr) << 16)
-                  | (encode_srgb8((b + rnd) / cnt, thr) << 8)
-                  | ((cnt * 255u + (PL_SS * PL_SS) / 2u) / (PL_SS * PL_SS));   // alpha = coverage
-        ulong key = (kmin & 0xFFFFFFFF00000000ul) | (ulong)rgba;
         n_atomics += write_point(color_buf, aux_buf, py * W + px, key, amin);
         n_pixels++;
         n_covered += cnt;

@@ -26,16 +26,18 @@ from .device import cl_device
 from .errors import ParamlodError
 from .frame import write_atomically
 
-VARIANTS = {"points": ("points", None), "points-ssaa": ("points-ssaa", None),
+# name -> (render variant, AA mode); points-4xSS is the direct variant drawn into 2x2 supersampled
+# key buffers, points-ssaa the thesis's local-framebuffer 4xSS
+VARIANTS = {"points": ("points", None), "points-4xSS": ("points", "4xSS"), "points-ssaa": ("points-ssaa", None),
             "tess": ("tess", "noAA"), "tess-4xSS+8xMS": ("tess", "4xSS+8xMS")}
-DEFAULT_VARIANTS = ["points", "points-ssaa", "tess", "tess-4xSS+8xMS"]
+DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8xMS"]
 
 
 def add_arguments(p):
     p.add_argument("scenarios", nargs="*", help=f"scenarios (default: {' '.join(DEFAULT)}; all: "
                                                 f"{' '.join(SCENARIOS)})")
     p.add_argument("--variants", nargs="+", default=DEFAULT_VARIANTS, choices=list(VARIANTS),
-                   help="render variants (default: all four)")
+                   help="render variants (default: all five)")
     p.add_argument("--size", default="1920x1080", help="frame size (default 1920x1080)")
     p.add_argument("--distances", type=float, nargs="+", default=[0.35, 0.6, 1.0, 2.0],
                    help="camera distances as multiples of the framing distance (default 0.35 0.6 1 2)")
@@ -118,7 +120,7 @@ def _rss_mib() -> float:
         return float("nan")
 
 
-def _device_buffers_mib(scene, size) -> float:
+def _device_buffers_mib(scene, size, ss: int = 1) -> float:
     from .render import renderer_for
 
     r = renderer_for(scene)
@@ -128,12 +130,14 @@ def _device_buffers_mib(scene, size) -> float:
         total += r.points.order_capacity * 8   # the point renderer's schedule
     w, h = size
     total += w * h * (16 + 40)   # key buffers + resolved outputs
+    total += w * h * ss * ss * 16 if ss > 1 else 0   # supersampled key buffers (points-4xSS)
     return total / 2 ** 20
 
 
 def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size):
     from .programs import start_timing, stop_timing
     from .render import RenderSettings, render, renderer_for
+    from .tess import parse_aa
 
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
@@ -141,6 +145,7 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
     rs.tess.l_min = l_min
     if aa:
         rs.tess.aa = aa
+        rs.points.supersample = parse_aa(aa).ss
     # the point variants run frame after frame without copying each to the host, as an
     # interactive viewer does (a frame's 80 MB read-back at 1080p is no part of a viewer's frame,
     # and the next frame's Python measured slower after it); one more frame, read back, gives
@@ -168,7 +173,7 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         "lod_steps_in": [med(s["lod_steps"][i]["in"] for s in st) for i in range(len(st[0].get("lod_steps", [])))],
         "samples": med(s.get("samples", 0) for s in st),
         "atomics": med(s.get("atomics", 0) for s in st),
-        "device_buffers_mib": _device_buffers_mib(scene, size),
+        "device_buffers_mib": _device_buffers_mib(scene, size, rs.points.supersample if variant == "points" else 1),
         "host_rss_mib": _rss_mib(),
     }
     if variant == "tess":
@@ -282,7 +287,7 @@ def run_bench(args) -> int:
         print(f"random 64-bit atom_min: {result['atomics_ceiling_per_s'] / 1e9:.2f} G/s", flush=True)
         if any(VARIANTS[v][0] == "tess" for v in args.variants):
             result["tess_ceiling"] = tess_ceiling(size)
-            print(f"tessellation, level 64: {result['tess_ceiling']['triangles_per_s'] / 1e9:.2f} G triangles/s",
+            print(f"tessellation, level 64: {_rate(result['tess_ceiling']['triangles_per_s'])} triangles/s",
                   flush=True)
         save()
     for name in names:
@@ -321,6 +326,10 @@ def run_bench(args) -> int:
     return 0
 
 
+def _rate(per_s: float) -> str:
+    return f"{per_s / 1e9:.2f} G" if per_s >= 1e8 else f"{per_s / 1e6:.1f} M"
+
+
 def format_markdown(result) -> str:
     ceil = result.get("atomics_ceiling_per_s")
     lines = [f"Device: {result['device']} ({result['device_type']}), {result['size'][0]}x{result['size'][1]}, "
@@ -329,7 +338,7 @@ def format_markdown(result) -> str:
         lines.append(f"Random 64-bit atom_min ceiling: {ceil / 1e9:.2f} G/s.")
     if "tess_ceiling" in result:
         t = result["tess_ceiling"]
-        lines.append(f"Tessellation ceiling (sphere, level {t['level']}): {t['triangles_per_s'] / 1e9:.2f} G triangles/s.")
+        lines.append(f"Tessellation ceiling (sphere, level {t['level']}): {_rate(t['triangles_per_s'])} triangles/s.")
     lines += ["", "| scenario | variant | distance | FPS | frame ms (p95) | LOD ms | render ms | host ms | render patches | % of ceiling |",
               "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, sc in result["scenarios"].items():

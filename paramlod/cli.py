@@ -26,8 +26,15 @@ def cmd_render(args) -> int:
     sf = load_scene(args.scene, size=args.size)
     camera = sf.camera
     if args.aa:
+        from .tess import parse_aa
+
         sf.settings.tess.aa = args.aa
         sf.settings.tess.validate()
+        aa = parse_aa(args.aa)
+        sf.settings.points.supersample = aa.ss   # the point variant supersamples only
+        if (args.variant or (None if sf.object_variants else sf.variant)) == "points" and aa.msaa > 1:
+            raise ParamlodError(f"--aa {args.aa}: the points variant supersamples only (4xSS, 9xSS, "
+                                f"16xSS); multisampling is a mode of the tess variant")
     if sf.object_variants and not args.variant:
         from .composite import render_mixed
 
@@ -106,8 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", action="append", help="output .png or .exr (repeatable)")
     r.add_argument("--size", type=_size, help="override the camera size, e.g. 1920x1080")
     r.add_argument("--variant", help="override the render variant: points, points-ssaa or tess")
-    r.add_argument("--aa", help="anti-aliasing of the tess variant: noAA, msaa2/4/8, ssaa2x2/3x3/4x4, "
-                                "or a combination such as 4xSS+8xMS")
+    r.add_argument("--aa", help="anti-aliasing: noAA, msaa2/4/8, ssaa2x2/3x3/4x4, or a combination such "
+                                "as 4xSS+8xMS (tess); the points variant takes the supersampling only")
     r.add_argument("--stats", help="write the frame statistics as JSON to this file")
     r.set_defaults(func=cmd_render)
 

@@ -2,6 +2,7 @@
 
 Two ulong buffers of width x height (kernels/keys.cl): the colour key (depth | sRGB RGBA8) and the
 aux key (depth | octahedral normal | object id). Renderers only ever atom_min into them.
+``Downsample`` resolves a supersampled KeyBuffer block by block into one of the frame's size.
 """
 from __future__ import annotations
 
@@ -21,10 +22,8 @@ class KeyBuffer:
         ctx = cl_device().context
         self.color = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self.aux = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
-        self._out = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4)]
-        # this buffer's own kernel object, its arguments set once
-        self._resolve = cl.Kernel(build(["keys.cl", "resolve.cl"]), "resolve")
-        self._resolve.set_args(self.color, self.aux, np.uint32(n), *self._out)
+        self._out = None   # the resolved Frame arrays on the device: made by the first resolve
+        self._resolve = None
 
     @property
     def pixel_count(self) -> int:
@@ -57,7 +56,14 @@ class KeyBuffer:
     def resolve_on_device(self):
         """Decode the keys into colour, depth, normal and id buffers on the device (enqueued;
         returns the kernel's event)."""
+        import pyopencl as cl
+
         n = self.pixel_count
+        if self._resolve is None:   # a supersampled buffer is only downsampled, never resolved
+            self._out = [cl.Buffer(cl_device().context, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4)]
+            # this buffer's own kernel object, its arguments set once
+            self._resolve = cl.Kernel(build(["keys.cl", "resolve.cl"]), "resolve")
+            self._resolve.set_args(self.color, self.aux, np.uint32(n), *self._out)
         return launch(cl_device().queue, self._resolve, ((n + 255) // 256 * 256,))
 
     def read_frame(self) -> Frame:
@@ -74,3 +80,33 @@ class KeyBuffer:
             cl.enqueue_copy(q, host, dev)
         q.finish()
         return Frame(color=color, depth=depth, normal=np.ascontiguousarray(normal[..., :3]), object_id=ids)
+
+
+class Downsample:
+    """Resolves a KeyBuffer ``ss`` times the frame's size into the frame's KeyBuffer, one pixel per
+    ss x ss block (kernels/subsamples.cl; numpy twin: points_reference.resolve_blocks): colour
+    averaged over the covered subsamples in linear light, alpha = coverage, nearest depth."""
+
+    def __init__(self, ss: int):
+        import pyopencl as cl
+        import pyopencl.array as cla
+
+        from .points_reference import srgb_tables
+
+        self.ss = int(ss)
+        self.kernel = cl.Kernel(build(["keys.cl", "subsamples.cl"], defines={"PL_SS": self.ss}), "downsample_keys")
+        self.tables = [cla.to_device(cl_device().queue, t) for t in srgb_tables()]
+        self._bound = None
+
+    def enqueue(self, src: KeyBuffer, dst: KeyBuffer):
+        """Enqueue the downsample of ``src`` into ``dst`` (returns the kernel's event)."""
+        if (src.width, src.height) != (dst.width * self.ss, dst.height * self.ss):
+            raise ValueError(f"downsample by {self.ss}: {src.width}x{src.height} keys do not make "
+                             f"{dst.width}x{dst.height} pixels")
+        args = (src.color, src.aux, np.uint32(dst.width), np.uint32(dst.height), *(t.data for t in self.tables),
+                dst.color, dst.aux)
+        if args != self._bound:
+            self.kernel.set_args(*args)
+            self._bound = args
+        n = dst.pixel_count
+        return launch(cl_device().queue, self.kernel, ((n + 255) // 256 * 256,))

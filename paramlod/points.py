@@ -30,6 +30,9 @@ class PointSettings:
     sampling: str = "segment"
     oversample: float = 1.0  # fixed oversampling factor on top of density (thesis Fig. 5.17: 1x, 2x, 3x)
     epsilon: float = 0.0     # step shrink: sample steps are (1 - epsilon) x the nominal step
+    # anti-aliasing of the direct variant: render into keys supersample x the frame's size, then
+    # resolve each block (colour averaged over covered subsamples, alpha = coverage); 1 = off
+    supersample: int = 1
 
     def validate(self):
         if not 0.1 <= self.density <= 16:
@@ -44,6 +47,9 @@ class PointSettings:
             raise SceneError(f"points oversample must be in [1, 8], got {self.oversample}")
         if not 0 <= self.epsilon <= 0.9:
             raise SceneError(f"points epsilon (step shrink) must be in [0, 0.9], got {self.epsilon}")
+        if self.supersample not in (1, 2, 3, 4) or isinstance(self.supersample, bool):
+            raise SceneError(f"points supersample must be 1 (off), 2, 3 or 4 subsamples per pixel side, "
+                             f"got {self.supersample!r}")
 
     def factor(self) -> np.float32:
         """Samples per measured pixel along each side, as the kernel receives it (float32)."""

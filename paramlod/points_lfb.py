@@ -108,7 +108,7 @@ class LocalFramebufferRenderer:
             defines = {"PL_SS": ss, "PL_TILE": self.tile, "PL_CHUNK": self.chunk, "PL_LOCAL": self.local_size}
             if self.record:
                 defines["PL_RECORD"] = 1
-            files = ["keys.cl", "points.cl", "points_lfb.cl"]
+            files = ["keys.cl", "points.cl", "subsamples.cl", "points_lfb.cl"]
             k = self._kernels[ss] = tuple(kernel(name, files, self.functions, defines)
                                           for name in ("lfb_count", "lfb_fill", "points_lfb"))
         return k

@@ -4,7 +4,9 @@ Given the samples the kernel evaluated (its PL_RECORD hook: each sample's global
 and its colour and attribute keys), it repeats the algorithm with numpy: the padded screen box of
 each patch and the tiles it touches, per-tile patch lists, the local framebuffers (a sample is kept
 only when its patch is listed for the tile it lands in, smallest key wins), and the integer
-resolve. The result must equal the kernel's key buffers bit for bit.
+resolve. The result must equal the kernel's key buffers bit for bit. ``resolve_blocks`` (the
+per-pixel resolve, kernels/subsamples.cl) is also the twin of the supersampled direct variant's
+downsample.
 """
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ def srgb_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 def encode_srgb8(x: np.ndarray, thr: np.ndarray) -> np.ndarray:
-    """Twin of encode_srgb8() in points_lfb.cl."""
+    """Twin of encode_srgb8() in subsamples.cl."""
     return (np.searchsorted(thr, np.asarray(x, np.uint32), side="right") - 1).astype(np.uint32)
 
 
@@ -94,7 +96,6 @@ def lfb_keys(rects: np.ndarray, sample_patch: np.ndarray, sub: np.ndarray, key: 
     Per sample: its patch id, its global subsample index (row-major over (height*ss, width*ss),
     0xFFFFFFFF when not drawable), its colour and attribute keys. Returns (colour, aux) uint64
     (height, width) and a dict of the counts that do not depend on execution order."""
-    lin, thr = srgb_tables()
     side = tile * ss
     SW, SH = width * ss, height * ss
     sub = np.asarray(sub, np.uint32)
@@ -111,27 +112,38 @@ def lfb_keys(rects: np.ndarray, sample_patch: np.ndarray, sub: np.ndarray, key: 
     la = np.full(SW * SH, CLEAR, np.uint64)
     np.minimum.at(lc, s[kept], k[kept])
     np.minimum.at(la, s[kept], a[kept])
-    # resolve: blocks of ss x ss subsamples -> one pixel
-    lc = lc.reshape(height, ss, width, ss).transpose(0, 2, 1, 3).reshape(height, width, ss * ss)
-    la = la.reshape(height, ss, width, ss).transpose(0, 2, 1, 3).reshape(height, width, ss * ss)
+    color, auxo, cnt = resolve_blocks(lc, la, width, height, ss)
+    stats = {"pixels": int(np.count_nonzero(cnt)), "covered": int(cnt.sum()),
+             # a sample lands in one tile, which renders it once if it lists the sample's patch
+             "hits": int(np.count_nonzero(kept)), "bbox_miss": int(np.count_nonzero(~kept))}
+    return color, auxo, stats
+
+
+def resolve_blocks(color_ss: np.ndarray, aux_ss: np.ndarray, width: int, height: int, ss: int):
+    """Twin of resolve_subsamples() in kernels/subsamples.cl over whole buffers: the colour and aux
+    keys of (height*ss, width*ss) subsamples (any shape of that size) -> (colour, aux) uint64
+    (height, width) and the covered subsamples per pixel. A pixel's colour is the average of its
+    covered subsamples' colours in linear light, alpha the coverage, depth the nearest's."""
+    lin, thr = srgb_tables()
+
+    def blocks(a):
+        a = np.asarray(a, np.uint64).reshape(height, ss, width, ss)
+        return a.transpose(0, 2, 1, 3).reshape(height, width, ss * ss)
+
+    lc, la = blocks(color_ss), blocks(aux_ss)
     cov = lc != CLEAR
     cnt = cov.sum(axis=-1).astype(np.uint64)
-    low = (lc & np.uint64(0xFFFFFFFF)).astype(np.uint64)
-    sums = []
-    for shift in (24, 16, 8):
-        ch = ((low >> np.uint64(shift)) & np.uint64(255)).astype(np.int64)
-        sums.append(np.where(cov, lin[ch].astype(np.uint64), np.uint64(0)).sum(axis=-1))
+    low = lc & np.uint64(0xFFFFFFFF)
     safe = np.maximum(cnt, 1)
     half = cnt >> np.uint64(1)
     rgba = np.zeros((height, width), np.uint64)
-    for shift, total in zip((24, 16, 8), sums):
+    for shift in (24, 16, 8):
+        ch = ((low >> np.uint64(shift)) & np.uint64(255)).astype(np.int64)
+        total = np.where(cov, lin[ch].astype(np.uint64), np.uint64(0)).sum(axis=-1)
         rgba |= encode_srgb8((total + half) // safe, thr).astype(np.uint64) << np.uint64(shift)
     n2 = ss * ss
     rgba |= (cnt * np.uint64(255) + np.uint64(n2 // 2)) // np.uint64(n2)
     kmin = lc.min(axis=-1)
-    color = np.where(cnt > 0, (kmin & np.uint64(0xFFFFFFFF00000000)) | rgba, CLEAR)
-    auxo = np.where(cnt > 0, la.min(axis=-1), CLEAR)
-    stats = {"pixels": int(np.count_nonzero(cnt)), "covered": int(cnt.sum()),
-             # a sample lands in one tile, which renders it once if it lists the sample's patch
-             "hits": int(np.count_nonzero(kept)), "bbox_miss": int(np.count_nonzero(~kept))}
-    return color.astype(np.uint64), auxo.astype(np.uint64), stats
+    color = np.where(cnt > 0, (kmin & np.uint64(0xFFFFFFFF00000000)) | rgba, CLEAR).astype(np.uint64)
+    aux = np.where(cnt > 0, la.min(axis=-1), CLEAR).astype(np.uint64)
+    return color, aux, cnt

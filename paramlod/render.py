@@ -9,7 +9,7 @@ import numpy as np
 from .camera import Camera
 from .device import cl_device
 from .errors import SceneError
-from .framebuffer import KeyBuffer
+from .framebuffer import Downsample, KeyBuffer
 from .lod import LOD_RENDER_TOTAL, LodSettings, LodStage
 from .points import COUNTERS, DirectPointRenderer, PointSettings
 from .points_lfb import LocalFramebufferRenderer, SsaaSettings
@@ -47,7 +47,9 @@ class Renderer:
         self.points = DirectPointRenderer(self.functions, record=record) if self.functions else None
         self.ssaa: LocalFramebufferRenderer | None = None   # built on first use
         self._tess = None
-        self.keys: KeyBuffer | None = None
+        self.keys: KeyBuffer | None = None      # the frame's key buffers
+        self.keys_ss: KeyBuffer | None = None   # supersampled ones of the direct variant
+        self._downsample: dict[int, Downsample] = {}
         self._scene_key, self._scene_dev = None, None
         self._cam_buf = None   # the camera record, rewritten every frame
         self._cam_host = None
@@ -62,7 +64,7 @@ class Renderer:
 
     def upload(self, scene: Scene, camera: Camera):
         """Device copies of the scene's buffers (re-sent only when the scene or its time changed)
-        and of this frame's camera."""
+        and of this frame's camera (the camera the samples are projected with)."""
         import pyopencl as cl
         import pyopencl.array as cla
 
@@ -85,10 +87,26 @@ class Renderer:
         # not waited for: every frame ends with a wait, so the host copy is free to change then
         self._cam_host = camera_record(camera)
         cl.enqueue_copy(q, self._cam_buf, self._cam_host, is_blocking=False)
-        dev = dict(self._scene_dev, cam=self._cam_buf)
+        return dict(self._scene_dev, cam=self._cam_buf)
+
+    def targets(self, camera: Camera, ss: int) -> tuple[Camera, KeyBuffer]:
+        """The camera to project with and the key buffers to draw into: the frame's, or with
+        ``ss`` > 1 supersampled ones ``ss`` times its size (downsampled into the frame's)."""
         if self.keys is None or (self.keys.width, self.keys.height) != camera.size:
             self.keys = KeyBuffer(*camera.size)
-        return dev
+        if ss == 1:
+            return camera, self.keys
+        size = (camera.width * ss, camera.height * ss)
+        if max(size) > 16384:
+            raise SceneError(f"points supersample {ss} at {camera.width}x{camera.height} needs "
+                             f"{size[0]}x{size[1]} subsamples, more than 16384 a side; use a smaller "
+                             f"factor or frame")
+        if self.keys_ss is None or (self.keys_ss.width, self.keys_ss.height) != size:
+            self.keys_ss = None   # free the old buffers before allocating the new ones
+            self.keys_ss = KeyBuffer(*size)
+        if ss not in self._downsample:
+            self._downsample[ss] = Downsample(ss)
+        return camera.with_size(size), self.keys_ss
 
     def render(self, scene: Scene, camera: Camera, settings: RenderSettings, variant: str = "points"):
         """One frame, copied to the host as a Frame (``render_on_device`` plus the read-back)."""
@@ -98,7 +116,11 @@ class Renderer:
         readback = (time.perf_counter() - t0) * 1e3
         written = int(np.count_nonzero(np.isfinite(frame.depth)))
         stats["pixels_written"] = written
-        stats["overdraw"] = stats["atomics"] / written if written else 0.0
+        drawn = written
+        ss = stats["supersample"]
+        if ss > 1:   # supersampled direct points: overdraw per covered subsample (alpha = coverage)
+            drawn = stats["covered_subsamples"] = int(np.rint(frame.color[..., 3] * (ss * ss)).sum())
+        stats["overdraw"] = stats["atomics"] / drawn if drawn else 0.0
         stats["ms"].update(readback=readback, total=stats["ms"]["frame"] + readback)
         frame.stats = stats
         frame.background = scene.background
@@ -109,20 +131,27 @@ class Renderer:
         """One frame up to the resolved buffers on the device (``self.keys``), what an interactive
         viewer pays; returns its stats. The direct point variant enqueues the whole frame (LOD
         stage, render, resolve) and waits once at its end: the renderer reads the patch count on
-        the device. If a LOD buffer overflowed, it grew and the frame is enqueued again."""
+        the device. If a LOD buffer overflowed, it grew and the frame is enqueued again.
+
+        With ``settings.points.supersample`` > 1 the points variant (and surfels) draw into key
+        buffers that many times the frame's size, seen by the same camera, which are then
+        resolved block by block into the frame's (``framebuffer.Downsample``)."""
         t0 = time.perf_counter()
-        dev = self.upload(scene, camera)
+        settings.points.validate()
+        ss = settings.points.supersample if variant == "points" else 1
+        cam, target = self.targets(camera, ss)
+        dev = self.upload(scene, cam)
         t_upload = time.perf_counter()
         host = 0.0   # Python time spent enqueueing (the rest of the frame is waiting)
         direct = self.lod is not None and variant == "points"
         while True:
             t1 = time.perf_counter()
-            self.keys.clear()
+            target.clear()
             if direct:
                 self.lod.enqueue(dev["inst"], dev["domains"], dev["cam"], settings.lod)
                 self.points.enqueue(self.lod.render.buf, self.lod.counters, LOD_RENDER_TOTAL,
                                     self.lod.render.capacity, dev["inst"], dev["materials"], dev["cam"],
-                                    dev["light"], self.keys, settings.points)
+                                    dev["light"], target, settings.points)
             elif self.lod is not None:   # points-ssaa needs the patch count on the host
                 self.lod.enqueue(dev["inst"], dev["domains"], dev["cam"], settings.lod,
                                  t_div=settings.ssaa.lod_divisor)
@@ -137,7 +166,8 @@ class Renderer:
                 counters = self.ssaa.draw(self.lod.render.buf, self.lod.result()[0], dev["inst"],
                                           dev["materials"], dev["cam"], dev["light"], self.keys, settings.ssaa)
                 ssaa_ms = (time.perf_counter() - ssaa_t0) * 1e3   # it waits for its scan and bins
-            surfel_stats = self.draw_surfels(scene, camera)
+            surfel_stats = self.draw_surfels(scene, cam, target)
+            downsampled = self._downsample[ss].enqueue(target, self.keys) if ss > 1 else None
             resolved = self.keys.resolve_on_device()
             host += time.perf_counter() - t1
             if direct:
@@ -160,6 +190,7 @@ class Renderer:
             "device": cl_device().name,
             "variant": variant,
             "size": list(camera.size),
+            "supersample": ss,
             "lod_steps": steps,
             "render_patches": n_render,
             "forced_patches": sum(s["forced"] for s in steps),
@@ -171,17 +202,18 @@ class Renderer:
             # kernels (points-ssaa's "render" is wall time: it waits inside); "host" is the
             # Python time spent preparing and enqueueing the frame.
             "ms": {"upload": (t_upload - t0) * 1e3, "lod": lod_ms, "render": render_ms,
-                   "resolve": _event_ms(resolved), "host": (t_upload - t0 + host) * 1e3,
+                   "resolve": _event_ms(resolved) + (_event_ms(downsampled) if ss > 1 else 0.0),
+                   "host": (t_upload - t0 + host) * 1e3,
                    "frame": (t4 - t0) * 1e3},
         }
 
-    def draw_surfels(self, scene: Scene, camera: Camera) -> list[dict]:
+    def draw_surfels(self, scene: Scene, camera: Camera, keys: KeyBuffer) -> list[dict]:
         """Splat each surfel object's prefix into the same key buffer (composed by depth)."""
         if not scene.surfels:
             return []
         from paramlod.surfels.render import draw_surfels
 
-        return [draw_surfels(self.keys, camera, so.surfels, so.strategy, so.transform, so.object_id, so.specular)
+        return [draw_surfels(keys, camera, so.surfels, so.strategy, so.transform, so.object_id, so.specular)
                 for so in scene.surfels]
 
 

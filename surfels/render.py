@@ -125,7 +125,8 @@ def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None) -> 
     r_world = size * pixel_world_size(camera, depth) / 2.0
     r = r_world / _scale(transform)          # object units
     n = surfels.prefix_for_spacing(r)
-    saturated = surfels.packing / (r * r) > N
+    # asking for N (1 + 1e-9) surfels is asking for N: the camera's roundoff must not flip it
+    saturated = surfels.packing / (r * r) > N * (1 + 1e-9)
     return {"prefix": n, "radius": max(r, surfels.spacing(n)) if saturated else r, "size_px": size,
             "saturated": bool(saturated), "distance": depth}
 

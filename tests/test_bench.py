@@ -18,6 +18,17 @@ def test_bench_writes_json_markdown_and_per_distance_rows(tmp_path):
     assert "| sphere | points | 0.6 |" in (tmp_path / "results.md").read_text()
 
 
+def test_bench_measures_supersampled_points(tmp_path):
+    assert main(["bench", "sphere", "--variants", "points", "points-4xSS", "--size", "64x48", "--distances",
+                 "1", "--frames", "2", "--warmup", "1", "--extras", "--out", str(tmp_path)]) == 0
+    v = json.loads((tmp_path / "results.json").read_text())["scenarios"]["sphere"]["variants"]
+    plain, ss = v["points"][0], v["points-4xSS"][0]
+    # the same silhouette from about four times the samples, in buffers 4x the size
+    assert abs(ss["pixels_written"] - plain["pixels_written"]) < 0.1 * plain["pixels_written"]
+    assert 2.5 * plain["samples"] < ss["samples"] < 6 * plain["samples"]
+    assert ss["device_buffers_mib"] > plain["device_buffers_mib"]
+
+
 def test_bench_names_unknown_scenarios(tmp_path, capsys):
     assert main(["bench", "teapot", "--out", str(tmp_path)]) == 2
     assert "unknown scenario(s) teapot" in capsys.readouterr().err

@@ -131,6 +131,12 @@ def test_surfels_and_parametric_objects_share_one_buffer(ball):
     assert np.all(ids[alone.coverage] == 2)
     assert np.array_equal(frame.depth[alone.coverage], alone.depth[alone.coverage])
     assert frame.stats["surfels"][0]["prefix"] > 0
+    # supersampled points: the surfels are splatted into the same supersampled buffers
+    rs = pl.RenderSettings()
+    rs.points.supersample = 2
+    aa = pl.render(scene, cam, settings=rs)
+    assert aa.stats["surfels"][0]["prefix"] > 0
+    assert abs(int((aa.object_id == 2).sum()) - int((ids == 2).sum())) < 0.1 * (ids == 2).sum()
     tess = pl.render(scene, cam, variant="tess")
     assert np.all(tess.object_id[alone.coverage] == 2) and (tess.object_id == 1).sum() > 500
 
