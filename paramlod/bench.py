@@ -137,15 +137,13 @@ def _device_buffers_mib(scene, size, ss: int = 1) -> float:
 def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size):
     from .programs import start_timing, stop_timing
     from .render import RenderSettings, render, renderer_for
-    from .tess import parse_aa
 
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
     rs.tess.l_max = l_max
     rs.tess.l_min = l_min
     if aa:
-        rs.tess.aa = aa
-        rs.points.supersample = parse_aa(aa).ss
+        rs.apply_aa(aa)
     # the point variants run frame after frame without copying each to the host, as an
     # interactive viewer does (a frame's 80 MB read-back at 1080p is no part of a viewer's frame,
     # and the next frame's Python measured slower after it); one more frame, read back, gives

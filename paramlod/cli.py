@@ -26,15 +26,8 @@ def cmd_render(args) -> int:
     sf = load_scene(args.scene, size=args.size)
     camera = sf.camera
     if args.aa:
-        from .tess import parse_aa
-
-        sf.settings.tess.aa = args.aa
-        sf.settings.tess.validate()
-        aa = parse_aa(args.aa)
-        sf.settings.points.supersample = aa.ss   # the point variant supersamples only
-        if (args.variant or (None if sf.object_variants else sf.variant)) == "points" and aa.msaa > 1:
-            raise ParamlodError(f"--aa {args.aa}: the points variant supersamples only (4xSS, 9xSS, "
-                                f"16xSS); multisampling is a mode of the tess variant")
+        variant = args.variant or (None if sf.object_variants else sf.variant)
+        sf.settings.apply_aa(args.aa, points_only=variant == "points")
     if sf.object_variants and not args.variant:
         from .composite import render_mixed
 

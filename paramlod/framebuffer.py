@@ -82,6 +82,23 @@ class KeyBuffer:
         return Frame(color=color, depth=depth, normal=np.ascontiguousarray(normal[..., :3]), object_id=ids)
 
 
+_srgb_device: dict = {}
+
+
+def srgb_device_tables():
+    """The (lin, thr) tables of points_reference.srgb_tables on the device (uploaded once per
+    context): both subsample resolves (kernels/subsamples.cl) read them."""
+    import pyopencl.array as cla
+
+    from .points_reference import srgb_tables
+
+    dev = cl_device()
+    key = id(dev.context)
+    if key not in _srgb_device:
+        _srgb_device[key] = tuple(cla.to_device(dev.queue, t) for t in srgb_tables())
+    return _srgb_device[key]
+
+
 class Downsample:
     """Resolves a KeyBuffer ``ss`` times the frame's size into the frame's KeyBuffer, one pixel per
     ss x ss block (kernels/subsamples.cl; numpy twin: points_reference.resolve_blocks): colour
@@ -89,13 +106,10 @@ class Downsample:
 
     def __init__(self, ss: int):
         import pyopencl as cl
-        import pyopencl.array as cla
-
-        from .points_reference import srgb_tables
 
         self.ss = int(ss)
         self.kernel = cl.Kernel(build(["keys.cl", "subsamples.cl"], defines={"PL_SS": self.ss}), "downsample_keys")
-        self.tables = [cla.to_device(cl_device().queue, t) for t in srgb_tables()]
+        self.tables = srgb_device_tables()
         self._bound = None
 
     def enqueue(self, src: KeyBuffer, dst: KeyBuffer):

@@ -19,7 +19,8 @@ from .device import cl_device
 from .errors import CapacityError, DeviceError, SceneError
 from .frame import Frame
 from .points import PointSettings
-from .points_reference import srgb_tables, tile_grid
+from .framebuffer import srgb_device_tables
+from .points_reference import tile_grid
 from .programs import kernel
 
 # kernels/points_lfb.cl C_* counters, same order
@@ -69,7 +70,6 @@ class LocalFramebufferRenderer:
     def __init__(self, functions, record: bool = False, tile: int = TILE, chunk: int = 64,
                  local_size: int = 64):
         import pyopencl as cl
-        import pyopencl.array as cla
         from pyopencl.scan import ExclusiveScanKernel
 
         if tile not in (4, 8, 16, 32):
@@ -81,12 +81,10 @@ class LocalFramebufferRenderer:
         self.functions = list(functions)
         self.record, self.tile, self.chunk, self.local_size = record, tile, chunk, local_size
         dev = cl_device()
-        q = dev.queue
         self._kernels: dict[int, tuple] = {}
         self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * len(LFB_COUNTERS))
         self.scan = ExclusiveScanKernel(dev.context, np.uint32, "a+b", "0")
-        lin, thr = srgb_tables()
-        self.lin, self.thr = cla.to_device(q, lin), cla.to_device(q, thr)
+        self.lin, self.thr = srgb_device_tables()
         self.n_tiles = 0
         self.rect_cap = self.pair_cap = 0
         self.rects = self.pairs = None

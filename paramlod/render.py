@@ -14,7 +14,7 @@ from .lod import LOD_RENDER_TOTAL, LodSettings, LodStage
 from .points import COUNTERS, DirectPointRenderer, PointSettings
 from .points_lfb import LocalFramebufferRenderer, SsaaSettings
 from .scene import Scene
-from .tess import TessSettings
+from .tess import TessSettings, parse_aa
 
 VARIANTS = ("points", "points-ssaa", "tess")
 # Key light in view space (towards the light: upper left, in front) and the ambient share.
@@ -27,6 +27,19 @@ class RenderSettings:
     points: PointSettings = field(default_factory=PointSettings)
     ssaa: SsaaSettings = field(default_factory=SsaaSettings)   # the local-framebuffer variant
     tess: TessSettings = field(default_factory=TessSettings)   # levels, spacing, AA mode
+
+    def apply_aa(self, mode, points_only: bool = False):
+        """Anti-aliasing ``mode`` (e.g. "4xSS+8xMS") for both renderers: tess takes it whole, the
+        points variant its supersampling. ``points_only``: the frame is drawn by the points
+        variant alone, so multisampling is an error. Returns the parsed AAMode."""
+        self.tess.aa = mode
+        self.tess.validate()
+        aa = parse_aa(mode)
+        if points_only and aa.msaa > 1:
+            raise SceneError(f"anti-aliasing {mode!r}: the points variant supersamples only (4xSS, 9xSS, "
+                             f"16xSS); multisampling is a mode of the tess variant")
+        self.points.supersample = aa.ss
+        return aa
 
 
 def camera_record(camera: Camera) -> np.ndarray:

@@ -15,7 +15,6 @@ from .lod import LodSettings
 from .points import PointSettings
 from .render import VARIANTS, RenderSettings
 from .scene import Material, Scene
-from .tess import parse_aa
 from .transforms import matrix as as_matrix, rotate, scale, translate
 
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation"}
@@ -147,9 +146,6 @@ def load_scene(path, size=None) -> SceneFile:
         points=PointSettings(density=ck.num(r, "density", "render", "render", default=PointSettings.density, lo=0.1, hi=16)))
     background = ck.vec(r, "background", 3, "render", "render", default=[0.12, 0.12, 0.14])
     settings.tess = _tess_settings(r, ck)
-    # `aa` holds for the point variant too, which supersamples only (no multisampling)
-    aa = parse_aa(settings.tess.aa)
-    settings.points.supersample = aa.ss
 
     scene = Scene(background=background)
     objects = data.get("objects", [])
@@ -191,9 +187,10 @@ def load_scene(path, size=None) -> SceneFile:
     mixed = per if any("variant" in o for o in objects) and len(set(per)) > 1 else None
     if mixed is None and any("variant" in o for o in objects):
         variant = per[0]
-    if mixed is None and variant == "points" and aa.msaa > 1:
-        ck.fail("render.aa", f"the points variant supersamples only (4xSS, 9xSS, 16xSS); {r['aa']!r} "
-                "asks for multisampling, a mode of the tess variant", "render", None, "aa")
+    try:   # `aa` holds for the point variant too, which supersamples only
+        settings.apply_aa(settings.tess.aa, points_only=mixed is None and variant == "points")
+    except SceneError as exc:
+        ck.fail("render.aa", str(exc), "render", None, "aa")
     meta = data.get("meta", {})
     if not isinstance(meta, dict):
         ck.fail("meta", "must be a table [meta] (title, caption)", "meta")
