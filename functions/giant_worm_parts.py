@@ -22,9 +22,9 @@ from sympy import cos, pi, sin
 
 from paramlod import parametric
 from paramlod.dsl import let
-from paramlod.function import Part
+from paramlod.function.define import Part
 
-from .cone import cone
+from paramlod.functions.cone import cone
 
 JAW = {"length": 1.6, "width": 1.0, "bend": 1.05, "curl": 0.35, "open_deg": 35.0}
 TOOTH_COLOR = (0.86, 0.82, 0.68)

@@ -1,16 +1,16 @@
 """paramlod: parametric objects and surfels rendered with per-frame level of detail."""
-from .errors import CapacityError, DeviceError, FunctionError, ParamlodError, SceneError
-from .function import ParametricFunction, Part, evaluate, parametric
-from . import dsl
-from .camera import Camera
-from .scene import Material, Scene
-from .transforms import matrix, rotate, scale, translate
-from .frame import Frame
-from .lod import LodSettings
-from .points import PointSettings
-from .points_lfb import SsaaSettings
-from .tess import TessSettings
-from .render import RenderSettings, render
+from paramlod.errors import CapacityError, DeviceError, FunctionError, ParamlodError, SceneError
+from paramlod.function.define import ParametricFunction, Part, evaluate, parametric
+from paramlod import dsl
+from paramlod.core.camera import Camera
+from paramlod.scene.scene import Material, Scene
+from paramlod.core.transforms import matrix, rotate, scale, translate
+from paramlod.core.frame import Frame
+from paramlod.lod.stage import LodSettings
+from paramlod.renderers.points import PointSettings
+from paramlod.renderers.points_lfb import SsaaSettings
+from paramlod.renderers.tess import TessSettings
+from paramlod.pipeline.driver import RenderSettings, render
 
 __all__ = [
     "CapacityError", "DeviceError", "FunctionError", "ParamlodError", "SceneError",

@@ -33,7 +33,7 @@ def let(expr, name: str | None = None):
     (forward mode, through each binding) all work on the bound pieces instead of one huge
     expression tree. Outside a body it returns ``expr`` unchanged. Vectors bind per component.
     """
-    from .function import current_bindings
+    from paramlod.function.define import current_bindings
 
     if _is_vec(expr):
         return sp.Matrix([let(e, name) for e in _vec(expr)])
@@ -206,7 +206,7 @@ def bezier_derivative(points: Sequence, t, order: int = 1):
 def _curve_derivatives(curve, t):
     """(c(t), c'(t), c''(t)) for a callable curve or an expression vector in the symbol ``t``."""
     if callable(curve):
-        from .function import suspend_bindings
+        from paramlod.function.define import suspend_bindings
 
         s = sp.Dummy("s", real=True)
         with suspend_bindings():  # the curve's expression is differentiated and rewritten below

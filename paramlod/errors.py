@@ -19,3 +19,15 @@ class SceneError(ParamlodError):
 
 class CapacityError(ParamlodError):
     """A buffer limit was reached; the message names the limit and how to raise it."""
+
+
+class SurfelError(ParamlodError):
+    """A mesh, scene, sampling parameter or .surfels file that cannot be used for surfels."""
+
+
+class DmriError(ParamlodError):
+    """A diffusion-MRI input (file, basis, mask, field) is unusable; the message names it and why."""
+
+
+class MeshError(ParamlodError):
+    """A mesh file, array or LOD build that cannot be used; the message names it and why."""

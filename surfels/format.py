@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from paramlod.frame import write_atomically
+from paramlod.core.frame import write_atomically
 
-from .errors import SurfelError
+from paramlod.errors import SurfelError
 
 FORMAT = "paramlod.surfels"
 VERSION = 1

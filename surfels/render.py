@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from paramlod.device import cl_device
-from paramlod.programs import kernel
+from paramlod.device.context import cl_device
+from paramlod.device.programs import kernel
 
-from .errors import SurfelError
-from .format import SurfelSet, load_surfels
+from paramlod.errors import SurfelError
+from paramlod.surfels.format import SurfelSet, load_surfels
 
 LOCAL = 64
 # IEEE float division and sqrt, as numpy does: the splat kernel's coverage and depth keys must match
@@ -135,7 +135,7 @@ class _DeviceSurfels:
     def __init__(self, s: SurfelSet):
         import pyopencl as cl
 
-        from .sources import srgb_to_linear
+        from paramlod.surfels.build.sources import srgb_to_linear
 
         n = len(s)
         pos = np.zeros((n, 4), np.float32)
@@ -167,7 +167,7 @@ def draw_surfels(keys, camera, surfels, strategy=None, transform=None, object_id
     or partly drawn paramlod.framebuffer.KeyBuffer); returns stats. The caller resolves."""
     import pyopencl as cl
 
-    from paramlod.render import LIGHT, camera_record
+    from paramlod.pipeline.driver import LIGHT, camera_record
 
     surfels = load_surfels(surfels)
     if (keys.width, keys.height) != tuple(camera.size):
@@ -194,7 +194,7 @@ def draw_surfels(keys, camera, surfels, strategy=None, transform=None, object_id
     n = choice["prefix"]
     radius_view = np.float32(choice["radius"] * _scale(transform))
     t0 = time.perf_counter()
-    kernel("surfels_splat", ["keys.cl", "surfels_splat.cl"], options=EXACT_DIVISION)(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view,
+    kernel("surfels_splat", ["common/keys.cl", "surfels/surfels_splat.cl"], options=EXACT_DIVISION)(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view,
                   *small, np.float32(specular), np.uint32(object_id), keys.color, keys.aux, cbuf)
     cl.enqueue_copy(q, counters, cbuf)
     q.finish()
@@ -211,7 +211,7 @@ def _round_up(n, m):
 
 def default_camera(surfels: SurfelSet, size=(512, 512), fov_y: float = 35.0, direction=(1.0, 0.6, 1.4)):
     """A perspective camera that frames the set's bounding sphere from ``direction``."""
-    from paramlod.camera import Camera
+    from paramlod.core.camera import Camera
 
     c, r = surfels.bounding_sphere()
     d = np.asarray(direction, np.float64)
@@ -227,7 +227,7 @@ def default_camera(surfels: SurfelSet, size=(512, 512), fov_y: float = 35.0, dir
 def render_surfels(path_or_set, camera=None, strategy=None, size=(512, 512), transform=None,
                    background=(0.12, 0.12, 0.14)):
     """Render one surfel set alone: -> paramlod.Frame (stats in frame.stats)."""
-    from paramlod.framebuffer import KeyBuffer
+    from paramlod.renderers.targets import KeyBuffer
 
     surfels = load_surfels(path_or_set)
     camera = camera or default_camera(surfels, size)

@@ -48,10 +48,10 @@ def record_direct_points(settings, size):
     the sample counts predicts)."""
     import pyopencl.array as cla
 
-    from paramlod.device import cl_device
-    from paramlod.framebuffer import KeyBuffer
-    from paramlod.points import DirectPointRenderer, grid_counts
-    from paramlod.render import renderer_for
+    from paramlod.device.context import cl_device
+    from paramlod.renderers.targets import KeyBuffer
+    from paramlod.renderers.points import DirectPointRenderer, grid_counts
+    from paramlod.pipeline.driver import renderer_for
 
     scene = pl.Scene()
     scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))

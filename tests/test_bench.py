@@ -1,7 +1,7 @@
 """`paramlod bench` runs end to end (tiny sizes) and writes what it promises; no speed is asserted."""
 import json
 
-from paramlod.cli import main
+from paramlod.app.cli import main
 
 
 def test_bench_writes_json_markdown_and_per_distance_rows(tmp_path):

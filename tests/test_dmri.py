@@ -16,7 +16,7 @@ from dipy.reconst.shm import real_sh_descoteaux_from_index, real_sh_tournier  # 
 
 import paramlod as pl  # noqa: E402
 from paramlod import dmri  # noqa: E402
-from paramlod.dmri import DmriError  # noqa: E402
+from paramlod.errors import DmriError  # noqa: E402
 
 GALLERY_DATA = Path(__file__).resolve().parents[1] / "gallery" / "data"
 
@@ -316,7 +316,7 @@ def test_gallery_data_files():
 # --- the glyph scene ------------------------------------------------------------------------------
 
 def _glyph_function():
-    from paramlod.registry import get_function
+    from paramlod.function.registry import get_function
 
     return get_function("sh_glyph")
 
@@ -370,7 +370,7 @@ def test_to_scene_colours_each_glyph_by_direction(synthetic):
 
 
 def test_to_scene_without_the_glyph_function_says_so(monkeypatch, csa):
-    import paramlod.registry as reg
+    import paramlod.function.registry as reg
 
     def missing(name):
         raise pl.FunctionError(f"no function named '{name}'")
@@ -383,7 +383,7 @@ def test_to_scene_without_the_glyph_function_says_so(monkeypatch, csa):
 def test_glyphs_command_renders_an_sh_volume_and_names_bad_files(tmp_path, capsys):
     import importlib.resources
 
-    from paramlod.cli import main
+    from paramlod.app.cli import main
 
     coef = str(importlib.resources.files("dipy") / "data" / "files" / "func_coef.nii.gz")
     out = tmp_path / "g.png"

@@ -11,8 +11,8 @@ from sympy import Abs, Max, Min, Mod, atan2, cos, exp, floor, frac, log, pi, sig
 
 import paramlod as pl
 from paramlod import dsl
-from paramlod.codegen import cl_function_source
-from paramlod.plugins import evaluate_cl
+from paramlod.function.codegen_cl import cl_function_source
+from paramlod.function.plugins import evaluate_cl
 
 
 # --- functions used by several tests (defined once, compiled together once) ----------------------
@@ -274,7 +274,7 @@ def test_snippet_functions_match_their_reference_on_opencl():
 def test_a_snippet_compiles_as_glsl_too():
     """The dialect's promise: the same snippet text compiles as GLSL 4.50 with dialect.glsl."""
     from paramlod import kernels
-    from paramlod.device import gl_context
+    from paramlod.device.context import gl_context
 
     ctx = gl_context()
     for fn in (ripple_snippet, poly_snippet):
@@ -283,7 +283,7 @@ def test_a_snippet_compiles_as_glsl_too():
                           else f"    float {p.name} = PARAM({offs[p.name]});" for p in fn.params)
         src = ("#version 450\nlayout(local_size_x = 1) in;\n"
                "layout(std430, binding = 0) buffer Params { float pl_params[]; };\n"
-               "#define PARAM(k) pl_params[k]\n" + kernels.source("dialect.glsl") + "\n"
+               "#define PARAM(k) pl_params[k]\n" + kernels.source("common/dialect.glsl") + "\n"
                f"vec3 snip(float u, float v) {{\n{loads}\n{fn.snippet.code}\n}}\n"
                "void main() { vec3 p = snip(0.25, 0.5); pl_params[0] = p.x + p.y + p.z; }\n")
         ctx.compute_shader(src).release()   # raises with the GLSL compiler's log on error

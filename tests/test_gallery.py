@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from paramlod.cli import main
-from paramlod.gallery import render_scene_file
+from paramlod.app.cli import main
+from paramlod.app.gallery import render_scene_file
 
 GALLERY = Path(__file__).resolve().parents[1] / "gallery"
 SCENES = sorted(GALLERY.glob("*.toml"))

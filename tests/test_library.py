@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import paramlod as pl
-from paramlod.plugins import evaluate_cl
-from paramlod.registry import builtin_functions, describe_functions
+from paramlod.function.plugins import evaluate_cl
+from paramlod.function.registry import builtin_functions, describe_functions
 
 FUNCTIONS_DIR = Path(__file__).resolve().parent.parent / "functions"
 LIBRARY = ["plane", "sphere", "torus", "cone", "johis_heart", "spiky_heart", "palm_trunk", "sh_glyph",

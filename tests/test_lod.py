@@ -4,9 +4,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import paramlod as pl
-from paramlod.lod_reference import lod_step, run_lod
-from paramlod.patches import FLAG_FORCED, EVAL_DTYPE, sort_key
-from paramlod.render import camera_record, renderer_for
+from paramlod.lod.reference import lod_step, run_lod
+from paramlod.lod.patches import FLAG_FORCED, EVAL_DTYPE, sort_key
+from paramlod.pipeline.driver import camera_record, renderer_for
 
 CAMERAS = [
     ((0, 0, 6), (0, 0, 0)),
@@ -152,8 +152,8 @@ def test_buffers_grow_instead_of_dropping_patches():
     cam = pl.Camera.look_at((0, 0, 3.0), (0, 0, 0), size=(512, 512))
     r = renderer_for(scene)
     # shrink the buffers to force overflow, then check nothing was lost
-    from paramlod.lod import _Buffer
-    from paramlod.patches import RENDER_DTYPE
+    from paramlod.lod.stage import _Buffer
+    from paramlod.lod.patches import RENDER_DTYPE
     r.lod.bufs = [_Buffer(EVAL_DTYPE, 1), _Buffer(EVAL_DTYPE, 1)]
     r.lod.render = _Buffer(RENDER_DTYPE, 1)
     for b in (*r.lod.bufs, r.lod.render):

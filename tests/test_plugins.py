@@ -10,8 +10,8 @@ import pytest
 import sympy as sp
 
 import paramlod as pl
-from paramlod import registry
-from paramlod.function import Part
+from paramlod.function import registry
+from paramlod.function.define import Part
 
 HERE = Path(__file__).resolve().parent
 PLUGINS = HERE / "plugins"
@@ -194,7 +194,7 @@ def test_a_python_if_on_an_expression_suggests_where():
 
 
 def test_a_function_no_backend_has():
-    from paramlod.plugins import validate
+    from paramlod.function.plugins import validate
 
     @pl.parametric()
     def bessel(u, v):

@@ -107,7 +107,7 @@ def test_srgb_encoding_table_rounds_the_srgb_curve():
 
     from paramlod import kernels
 
-    src = kernels.source("keys.cl")
+    src = kernels.source("common/keys.cl")
     body = src[src.index("SRGB8_THRESHOLDS[256] = {"):]
     t = np.array([float(x) for x in re.findall(r"-?\d+\.\d+(?:e-?\d+)?", body[:body.index("};")])])
     assert len(t) == 256

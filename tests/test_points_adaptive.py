@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 import paramlod as pl
-from paramlod.frame import Frame
-from paramlod.points import PointSettings, count_holes, grid_counts, side_counts
-from paramlod.registry import get_function
-from paramlod.render import RenderSettings
+from paramlod.core.frame import Frame
+from paramlod.renderers.points import PointSettings, count_holes, grid_counts, side_counts
+from paramlod.function.registry import get_function
+from paramlod.pipeline.driver import RenderSettings
 
 from conftest import record_direct_points
 

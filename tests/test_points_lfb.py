@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 import paramlod as pl
-from paramlod import points_reference as ref
-from paramlod.device import cl_device
-from paramlod.framebuffer import KeyBuffer
-from paramlod.lod import LodSettings, LodStage
-from paramlod.points import DirectPointRenderer, PointSettings, count_holes, grid_counts
-from paramlod.points_lfb import LocalFramebufferRenderer, SsaaSettings, render_points_ssaa
-from paramlod.render import LIGHT, camera_record
+from paramlod.renderers import points_reference as ref
+from paramlod.device.context import cl_device
+from paramlod.renderers.targets import KeyBuffer
+from paramlod.lod.stage import LodSettings, LodStage
+from paramlod.renderers.points import DirectPointRenderer, PointSettings, count_holes, grid_counts
+from paramlod.renderers.points_lfb import LocalFramebufferRenderer, SsaaSettings, render_points_ssaa
+from paramlod.pipeline.driver import LIGHT, camera_record
 
 from conftest import sphere_disc
 from test_points_adaptive import DISTANCES, SHAPES, camera_at, dense_silhouette, shape_scene

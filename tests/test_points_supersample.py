@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import paramlod as pl
-from paramlod.points_reference import resolve_blocks
-from paramlod.render import RenderSettings, renderer_for
+from paramlod.renderers.points_reference import resolve_blocks
+from paramlod.pipeline.driver import RenderSettings, renderer_for
 
 from conftest import sphere_disc
 
@@ -78,7 +78,7 @@ def test_supersample_settings_are_checked(tmp_path, capsys):
         pl.render(scene, cam, settings=_settings(5))
     with pytest.raises(pl.SceneError, match="16384 a side"):
         pl.render(scene, cam.with_size((9000, 16)), settings=_settings(2))
-    from paramlod.cli import main
+    from paramlod.app.cli import main
 
     path = tmp_path / "s.toml"
     path.write_text('[camera]\neye = [0, 0, 3]\nsize = [32, 32]\n[render]\naa = "8xMS"\n'

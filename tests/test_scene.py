@@ -7,8 +7,8 @@ import pytest
 import sympy as sp
 
 import paramlod as pl
-from paramlod.cli import main
-from paramlod.scenefile import load_scene
+from paramlod.app.cli import main
+from paramlod.app.scenefile import load_scene
 
 
 def test_instances_render_like_separate_objects():
@@ -107,7 +107,7 @@ def test_cli_errors_are_messages_not_tracebacks(tmp_path, capsys):
 
 
 def test_info_reports_the_gl_limits_tessellation_needs():
-    from paramlod.device import gl_info
+    from paramlod.device.context import gl_info
 
     info = gl_info()
     # GL 4.x guarantees level 64; the renderers rely on it (tess.MAX_LEVEL)

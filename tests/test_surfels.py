@@ -8,11 +8,11 @@ import pytest
 import trimesh  # noqa: E402
 import scipy.spatial as spatial  # noqa: E402
 
-from paramlod.camera import Camera  # noqa: E402
+from paramlod.core.camera import Camera  # noqa: E402
 from paramlod.surfels import (FixedCount, FixedSize, SurfelSet, load_mesh, mesh_gbuffer,  # noqa: E402
                               render_surfels, sample_gbuffer)
 from paramlod.surfels.format import nearest_neighbour_distances  # noqa: E402
-from paramlod.surfels.gbuffer import MeshRasterizer  # noqa: E402
+from paramlod.surfels.build.gbuffer import MeshRasterizer  # noqa: E402
 
 N = 10_000
 
@@ -131,7 +131,7 @@ def test_growing_prefixes_cover_progressively(bunny, gbuf, surfels):
     r_full = surfels.spacing(N)
     cov = []
     for n in (100, 1000, 10_000):
-        from paramlod.framebuffer import KeyBuffer
+        from paramlod.renderers.targets import KeyBuffer
         from paramlod.surfels import draw_surfels
 
         keys = KeyBuffer(*cam.size)

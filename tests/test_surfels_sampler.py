@@ -9,7 +9,7 @@ import paramlod as pl  # noqa: E402
 from paramlod.surfels import (Sampler, SurfelSet, mesh_gbuffer, sample_gbuffer, sample_mesh,  # noqa: E402
                               sample_scene, soup_from_trimesh)
 from paramlod.surfels import reference as ref  # noqa: E402
-from paramlod.surfels.sampler import (level_strides, remap_keys, run_levels, splat_r2,  # noqa: E402
+from paramlod.surfels.build.sampler import (level_strides, remap_keys, run_levels, splat_r2,  # noqa: E402
                                       threshold_r2)
 
 

@@ -11,13 +11,13 @@ import sympy as sp
 from conftest import iou, sphere_disc
 
 import paramlod as pl
-from paramlod.composite import composite, render_mixed, split_by_variant
+from paramlod.pipeline.composite import composite, render_mixed, split_by_variant
 from paramlod.errors import FunctionError, SceneError
-from paramlod.frame import Frame
-from paramlod.lod import LodSettings
-from paramlod.patches import RENDER_DTYPE
-from paramlod.registry import all_functions, get_function
-from paramlod.tess import (AAMode, TessRenderer, TessSettings, glsl_surface, lod_divisor, parse_aa,
+from paramlod.core.frame import Frame
+from paramlod.lod.stage import LodSettings
+from paramlod.lod.patches import RENDER_DTYPE
+from paramlod.function.registry import all_functions, get_function
+from paramlod.renderers.tess import (AAMode, TessRenderer, TessSettings, glsl_surface, lod_divisor, parse_aa,
                            render_tess)
 
 
@@ -127,8 +127,8 @@ def test_function_without_glsl_form_is_named():
 
 
 def test_shader_compile_error_shows_generated_lines():
-    from paramlod.device import gl_context
-    from paramlod.tess import _program
+    from paramlod.device.context import gl_context
+    from paramlod.renderers.tess import _program
 
     bad = "#version 450 core\nout vec4 c;\nvoid main() {\n    c = vec4(no_such_name);\n}\n"
     good = "#version 450 core\nvoid main() { gl_Position = vec4(0.0); }\n"
@@ -352,7 +352,7 @@ def test_render_list_transfer_is_reported():
         assert k in ms and ms[k] >= 0
     assert f.stats["render_list_bytes"] == 64 * f.stats["render_patches"]
     # the same frame through another LOD stage (as paramlod.render's Renderer would pass its own)
-    from paramlod.render import renderer_for
+    from paramlod.pipeline.driver import renderer_for
 
     g = render_tess(scene, cam, lod_stage=renderer_for(scene).lod)
     assert np.array_equal(g.depth, f.depth) and np.array_equal(g.color, f.color)

@@ -1,0 +1,1 @@
+"""Commands: CLI, scene files, gallery, glyphs, surfel commands, benchmarks."""

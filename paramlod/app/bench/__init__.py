@@ -1,0 +1,1 @@
+"""paramlod bench: scenarios, measurements, reports."""

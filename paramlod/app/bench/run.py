@@ -1,0 +1,404 @@
+"""``paramlod bench``: the thesis's measurements (section 5.6) on this machine's device.
+
+For each scenario and variant the camera orbits the scene once at several distances (multiples of
+the distance at which the scene just fills the frame), after warm-up frames; per distance we report
+median and 95th-percentile frame time, LOD and render time, kernel (device) time, the Python time
+spent preparing and enqueueing a frame (host) and the time the device waited (idle), the CL->GL
+transfer of the tessellation variant, patches per LOD step, render patches, pixels written,
+overdraw, our device buffers and the host RSS. In the same run: the random 64-bit
+atom_min ceiling, the tessellated triangles/s of a trivial function, the OpenCL evaluation
+throughput of every built-in function, and the blue-surfel sampling and prefix-rendering costs.
+Results go to DIR/results.json (written after every measurement), DIR/results.md and plots.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from paramlod.app.bench.scenes import DEFAULT, SCENARIOS
+from paramlod.core.camera import Camera
+from paramlod.device.context import cl_device
+from paramlod.errors import ParamlodError
+from paramlod.core.frame import write_atomically
+
+# name -> (render variant, AA mode); points-4xSS is the direct variant drawn into 2x2 supersampled
+# key buffers, points-ssaa the thesis's local-framebuffer 4xSS
+VARIANTS = {"points": ("points", None), "points-4xSS": ("points", "4xSS"), "points-ssaa": ("points-ssaa", None),
+            "tess": ("tess", "noAA"), "tess-4xSS+8xMS": ("tess", "4xSS+8xMS")}
+DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8xMS"]
+
+
+def add_arguments(p):
+    p.add_argument("scenarios", nargs="*", help=f"scenarios (default: {' '.join(DEFAULT)}; all: "
+                                                f"{' '.join(SCENARIOS)})")
+    p.add_argument("--variants", nargs="+", default=DEFAULT_VARIANTS, choices=list(VARIANTS),
+                   help="render variants (default: all five)")
+    p.add_argument("--size", default="1920x1080", help="frame size (default 1920x1080)")
+    p.add_argument("--distances", type=float, nargs="+", default=[0.35, 0.6, 1.0, 2.0],
+                   help="camera distances as multiples of the framing distance (default 0.35 0.6 1 2)")
+    p.add_argument("--frames", type=int, default=8, help="timed frames per orbit (default 8)")
+    p.add_argument("--warmup", type=int, default=2, help="untimed frames before each orbit (default 2)")
+    p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels"],
+                   choices=["ceilings", "functions", "surfels"], help="extra measurements (default all)")
+    p.add_argument("--out", default="out/bench", help="folder for results (default out/bench)")
+
+
+# --- ceilings ------------------------------------------------------------------------------------
+def atomics_ceiling(width, height, repeats=5) -> float:
+    """Random 64-bit atom_min per second into a width x height buffer."""
+    import pyopencl as cl
+
+    from paramlod.function.programs import kernel
+
+    k = kernel("random_atom_min", ["bench/bench.cl"])
+    dev = cl_device()
+    n = width * height
+    buf = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, n * 8)
+    items = 1 << 22 if dev.is_gpu else 1 << 16
+    per_item = 64
+    best = 0.0
+    for r in range(repeats + 1):
+        cl.enqueue_fill_buffer(dev.queue, buf, np.uint64(0xFFFFFFFFFFFFFFFF), 0, n * 8)
+        evt = k(dev.queue, (items,), None, buf, np.uint32(n), np.uint32(per_item), np.uint32(r))
+        evt.wait()
+        if r:  # the first launch includes warm-up
+            best = max(best, items * per_item / ((evt.profile.end - evt.profile.start) * 1e-9))
+    return best
+
+
+def tess_ceiling(size, level=64, repeats=3) -> dict:
+    """Triangles/s of hardware tessellation of a trivial function (a sphere) at a fixed level."""
+    from paramlod.lod.stage import LodSettings
+    from paramlod.pipeline.driver import RenderSettings, render
+    from paramlod.scene.scene import Scene
+    from paramlod.renderers.tess import TessSettings
+
+    s = Scene()
+    s.add("sphere")
+    cam = Camera.look_at((0, 0, 3.2), (0, 0, 0), size=size)
+    rs = RenderSettings(lod=LodSettings(threshold=(1e6, 1e6), initial_grid=(32, 32)),
+                        tess=TessSettings(mode="fixed", levels=(float(level), float(level))))
+    best = None
+    for _ in range(repeats + 1):
+        f = render(s, cam, "tess", rs)
+        ms = f.stats["ms"]["draw"]
+        if best is None or ms < best[0]:
+            best = (ms, f.stats["render_patches"])
+    ms, patches = best
+    tris = patches * 2 * level * level
+    return {"level": level, "patches": patches, "triangles": tris, "draw_ms": ms, "triangles_per_s": tris / (ms * 1e-3)}
+
+
+# --- frames --------------------------------------------------------------------------------------
+def _orbit(base: Camera, centre, dist, k, n, size) -> Camera:
+    d = base.eye - centre
+    up = base.view[1, :3]
+    a = 2 * np.pi * k / max(n, 1)
+    # rotate the viewing direction about the camera's up axis (Rodrigues)
+    d = d * np.cos(a) + np.cross(up, d) * np.sin(a) + up * np.dot(up, d) * (1 - np.cos(a))
+    r = np.linalg.norm(d)
+    return Camera.look_at(centre + d * dist, centre, up, base.fov_y, size,
+                          near=max(r * dist * 1e-3, r * dist - 2 * r), far=r * dist + 2 * r)
+
+
+def _frame_ms(ms: dict) -> float:
+    return ms["frame"] if "frame" in ms else ms["total"] - ms.get("readback", 0.0)
+
+
+def _rss_mib() -> float:
+    try:
+        with open("/proc/self/statm") as f:
+            import os
+
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+    except OSError:
+        return float("nan")
+
+
+def _device_buffers_mib(scene, size, ss: int = 1) -> float:
+    from paramlod.pipeline.driver import renderer_for
+
+    r = renderer_for(scene)
+    total = 0
+    if r.lod is not None:
+        total += sum(b.capacity * b.dtype.itemsize for b in (*r.lod.bufs, r.lod.render))
+        total += r.points.order_capacity * 8   # the point renderer's schedule
+    w, h = size
+    total += w * h * (16 + 40)   # key buffers + resolved outputs
+    total += w * h * ss * ss * 16 if ss > 1 else 0   # supersampled key buffers (points-4xSS)
+    return total / 2 ** 20
+
+
+def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size):
+    from paramlod.device.programs import start_timing, stop_timing
+    from paramlod.pipeline.driver import RenderSettings, render, renderer_for
+
+    rs = RenderSettings()
+    rs.lod.threshold = (threshold, threshold)
+    rs.tess.l_max = l_max
+    rs.tess.l_min = l_min
+    if aa:
+        rs.apply_aa(aa)
+    # the point variants run frame after frame without copying each to the host, as an
+    # interactive viewer does (a frame's 80 MB read-back at 1080p is no part of a viewer's frame,
+    # and the next frame's Python measured slower after it); one more frame, read back, gives
+    # the pixel statistics and the read-back time
+    on_device = None if variant == "tess" else renderer_for(scene).render_on_device
+    rows = []
+    for k in range(args.warmup + args.frames):
+        cam = _orbit(base, centre, dist, k, args.frames, size)
+        start_timing()
+        stats = on_device(scene, cam, rs, variant) if on_device else render(scene, cam, variant, rs).stats
+        kernel_ms = stop_timing()
+        if k >= args.warmup:
+            rows.append((stats, kernel_ms))
+    st = [r[0] for r in rows]
+    pixels = render(scene, cam, variant, rs).stats if on_device else None
+    frame = [_frame_ms(s["ms"]) for s in st]
+    med = statistics.median
+    out = {
+        "distance": dist, "frames": len(rows),
+        "frame_ms": med(frame), "frame_ms_p95": float(np.percentile(frame, 95)),
+        "lod_ms": med(s["ms"].get("lod", 0.0) for s in st),
+        "render_ms": med(s["ms"].get("render", s["ms"].get("draw", 0.0)) for s in st),
+        "cl_kernel_ms": med(r[1] for r in rows),
+        "render_patches": med(s.get("render_patches", 0) for s in st),
+        "lod_steps_in": [med(s["lod_steps"][i]["in"] for s in st) for i in range(len(st[0].get("lod_steps", [])))],
+        "samples": med(s.get("samples", 0) for s in st),
+        "atomics": med(s.get("atomics", 0) for s in st),
+        "device_buffers_mib": _device_buffers_mib(scene, size, rs.points.supersample if variant == "points" else 1),
+        "host_rss_mib": _rss_mib(),
+    }
+    if variant == "tess":
+        out["cl_gl_transfer_ms"] = med(s["ms"].get("render_list", 0.0) for s in st)
+        out["aa_effective"] = st[0].get("aa_effective")
+        out["triangles"] = med(s.get("triangles", 0) for s in st)
+        out["host_ms"] = None   # GL work is not timed by OpenCL events
+        out.update(pixels_written=med(s.get("pixels_written", 0) for s in st),
+                   overdraw=med(s.get("overdraw", 0.0) for s in st),
+                   readback_ms=med(s["ms"].get("readback", 0.0) for s in st))
+    else:
+        # host: Python time preparing and enqueueing the frame (it overlaps the device's work);
+        # idle: the part of the frame not covered by OpenCL kernels (launch gaps, waits, transfers)
+        out["host_ms"] = med(s["ms"]["host"] for s in st)
+        # pixel statistics and read-back time of the extra frame read back
+        out.update(pixels_written=pixels["pixels_written"], overdraw=pixels["overdraw"],
+                   readback_ms=pixels["ms"]["readback"])
+        out["idle_ms"] = max(0.0, out["frame_ms"] - out["cl_kernel_ms"])
+    out["fps"] = 1e3 / out["frame_ms"] if out["frame_ms"] > 0 else float("inf")
+    return out
+
+
+# --- function throughput and surfels ---------------------------------------------------------------
+def function_throughput(nu=2048, nv=1024) -> list[dict]:
+    """OpenCL evaluation (positions) of every built-in, and of SH glyphs of each order."""
+    import pyopencl.array as cla
+
+    from paramlod.functions.sh_glyph import make_sh_glyph
+
+    from paramlod.function.programs import kernel
+    from paramlod.function.registry import all_functions
+
+    q = cl_device().queue
+    out_buf = cla.empty(q, nu * nv, np.float32)
+    fns = dict(all_functions())
+    fns.update({f"sh_glyph order {o}": make_sh_glyph(o) for o in (2, 4, 6, 8, 10, 12)})
+    rows = []
+    for name, fn in sorted(fns.items()):
+        k = kernel("eval_throughput", ["common/eval.cl"], [fn])
+        params = cla.to_device(q, np.concatenate([fn.param_block(), np.zeros(1, np.float32)]))
+        du = (fn.u_range[1] - fn.u_range[0]) / nu
+        dv = (fn.v_range[1] - fn.v_range[0]) / nv
+        best = None
+        for r in range(4):
+            evt = k(q, (nu, nv), None, np.uint32(0), np.float32(fn.u_range[0]), np.float32(du),
+                    np.float32(fn.v_range[0]), np.float32(dv), np.uint32(nu), params.data, out_buf.data)
+            evt.wait()
+            if r:
+                t = (evt.profile.end - evt.profile.start) * 1e-9
+                best = t if best is None else min(best, t)
+        rows.append({"function": name, "samples_per_s": nu * nv / best})
+    return rows
+
+
+def surfel_costs(size) -> dict:
+    from paramlod.surfels import FixedCount, render_surfels, sample_mesh
+
+    try:
+        import importlib.resources
+
+        mesh = str(importlib.resources.files("pymeshfix").joinpath("examples/StanfordBunny.ply"))
+        name = "Stanford bunny (pymeshfix)"
+    except ModuleNotFoundError:
+        import trimesh
+
+        mesh, name = trimesh.creation.icosphere(subdivisions=5), "icosphere (pymeshfix not installed)"
+    out = {"mesh": name, "sampling": [], "render": []}
+    big = None
+    for n in (10_000, 100_000):
+        t0 = time.perf_counter()
+        s = sample_mesh(mesh, n)
+        out["sampling"].append({"n": n, "got": len(s), "seconds": time.perf_counter() - t0})
+        big = s
+    from paramlod.surfels import default_camera
+
+    cam = default_camera(big, size)
+    for n in (1_000, 3_000, 10_000, 30_000, 100_000):
+        if n > len(big):
+            break
+        times = []
+        for r in range(6):
+            f = render_surfels(big, cam, FixedCount(n))
+            if r:
+                times.append(f.stats["surfels"]["ms"] if isinstance(f.stats.get("surfels"), dict)
+                             else f.stats["surfels"][0]["ms"])
+        out["render"].append({"prefix": n, "ms": statistics.median(times)})
+    return out
+
+
+# --- driver -----------------------------------------------------------------------------------------
+def run_bench(args) -> int:
+    from paramlod.app.cli import _size
+    from paramlod.scene.framing import framing_camera, scene_box
+
+    size = _size(args.size)
+    names = args.scenarios or DEFAULT
+    unknown = [n for n in names if n not in SCENARIOS]
+    if unknown:
+        raise ParamlodError(f"unknown scenario(s) {', '.join(unknown)} (available: {', '.join(SCENARIOS)})")
+    dev = cl_device()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    result = {"device": dev.name, "device_type": "GPU" if dev.is_gpu else "CPU", "host": platform.node(),
+              "size": list(size), "frames": args.frames, "warmup": args.warmup, "scenarios": {}}
+
+    def save():
+        write_atomically(out / "results.json", lambda tmp: Path(tmp).write_text(json.dumps(result, indent=1)))
+
+    if "ceilings" in args.extras:
+        result["atomics_ceiling_per_s"] = atomics_ceiling(*size)
+        print(f"random 64-bit atom_min: {result['atomics_ceiling_per_s'] / 1e9:.2f} G/s", flush=True)
+        if any(VARIANTS[v][0] == "tess" for v in args.variants):
+            result["tess_ceiling"] = tess_ceiling(size)
+            print(f"tessellation, level 64: {_rate(result['tess_ceiling']['triangles_per_s'])} triangles/s",
+                  flush=True)
+        save()
+    for name in names:
+        build, direction, up, threshold, l_max, l_min = SCENARIOS[name]
+        scene = build()
+        base = framing_camera(scene, direction, up, 40.0, size, margin=1.0)
+        lo, hi = scene_box(scene)
+        centre = (lo + hi) / 2
+        per = result["scenarios"].setdefault(name, {"instances": scene.instance_count, "threshold": threshold,
+                                                     "l_max": l_max, "l_min": l_min, "variants": {}})
+        for vname in args.variants:
+            variant, aa = VARIANTS[vname]
+            rows = per["variants"].setdefault(vname, [])
+            for dist in args.distances:
+                try:
+                    r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size)
+                except ParamlodError as exc:
+                    r = {"distance": dist, "error": str(exc)}
+                rows.append(r)
+                msg = (f"{name} {vname} d={dist}: " + (f"{r['frame_ms']:.2f} ms ({r['fps']:.0f} FPS), LOD "
+                       f"{r['lod_ms']:.2f}, render {r['render_ms']:.2f}, {r['render_patches']:.0f} patches"
+                       if "error" not in r else f"error: {r['error']}"))
+                print(msg, flush=True)
+                save()
+    if "functions" in args.extras:
+        result["function_throughput"] = function_throughput()
+        save()
+    if "surfels" in args.extras:
+        result["surfels"] = surfel_costs(size)
+        save()
+    md = format_markdown(result)
+    write_atomically(out / "results.md", lambda tmp: Path(tmp).write_text(md))
+    plots = make_plots(result, out)
+    print(md)
+    print(f"results: {out / 'results.json'}, {out / 'results.md'}" + (f", {len(plots)} plots" if plots else ""))
+    return 0
+
+
+def _rate(per_s: float) -> str:
+    return f"{per_s / 1e9:.2f} G" if per_s >= 1e8 else f"{per_s / 1e6:.1f} M"
+
+
+def format_markdown(result) -> str:
+    ceil = result.get("atomics_ceiling_per_s")
+    lines = [f"Device: {result['device']} ({result['device_type']}), {result['size'][0]}x{result['size'][1]}, "
+             f"{result['frames']} frames per orbit after {result['warmup']} warm-up frames; medians."]
+    if ceil:
+        lines.append(f"Random 64-bit atom_min ceiling: {ceil / 1e9:.2f} G/s.")
+    if "tess_ceiling" in result:
+        t = result["tess_ceiling"]
+        lines.append(f"Tessellation ceiling (sphere, level {t['level']}): {_rate(t['triangles_per_s'])} triangles/s.")
+    lines += ["", "| scenario | variant | distance | FPS | frame ms (p95) | LOD ms | render ms | host ms | render patches | % of ceiling |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for name, sc in result["scenarios"].items():
+        for vname, rows in sc["variants"].items():
+            for r in rows:
+                if "error" in r:
+                    lines.append(f"| {name} | {vname} | {r['distance']} | error: {r['error'][:60]} |||||||")
+                    continue
+                frac = ""
+                if vname.startswith("points") and ceil:
+                    frac = f"{100 * r['atomics'] / (r['render_ms'] * 1e-3) / ceil:.1f}% atomics"
+                elif vname.startswith("tess") and "tess_ceiling" in result and r.get("triangles"):
+                    frac = f"{100 * r['triangles'] / (r['render_ms'] * 1e-3) / result['tess_ceiling']['triangles_per_s']:.1f}% tris"
+                host = "n/a" if r.get("host_ms") is None else f"{r['host_ms']:.2f}"
+                lines.append(f"| {name} | {vname} | {r['distance']} | {r['fps']:.0f} | {r['frame_ms']:.2f} "
+                             f"({r['frame_ms_p95']:.2f}) | {r['lod_ms']:.2f} | {r['render_ms']:.2f} | {host} | "
+                             f"{r['render_patches']:.0f} | {frac} |")
+    if "function_throughput" in result:
+        lines += ["", "| function | OpenCL samples/s |", "|---|---:|"]
+        lines += [f"| {r['function']} | {r['samples_per_s'] / 1e6:,.0f} M |" for r in result["function_throughput"]]
+    if "surfels" in result:
+        s = result["surfels"]
+        lines += ["", f"Blue surfels of the {s['mesh']}:", "",
+                  "| surfels | sampling s |", "|---:|---:|"]
+        lines += [f"| {r['n']:,} | {r['seconds']:.2f} |" for r in s["sampling"]]
+        lines += ["", "| prefix | render ms |", "|---:|---:|"]
+        lines += [f"| {r['prefix']:,} | {r['ms']:.3f} |" for r in s["render"]]
+    return "\n".join(lines) + "\n"
+
+
+def make_plots(result, out: Path) -> list[Path]:
+    """FPS against distance per scenario, and patches per LOD step at the nearest distance."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib is not installed: no plots (pip install 'paramlod[bench]')")
+        return []
+    paths = []
+    for name, sc in result["scenarios"].items():
+        fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.6))
+        for vname, rows in sc["variants"].items():
+            ok = [r for r in rows if "error" not in r]
+            a.plot([r["distance"] for r in ok], [r["fps"] for r in ok], marker="o", label=vname)
+        a.set_xlabel("camera distance (x framing distance)")
+        a.set_ylabel("FPS")
+        a.set_yscale("log")
+        a.set_title(f"{name}: FPS against distance")
+        a.legend(fontsize=8)
+        first = next(iter(sc["variants"].values()))
+        near = next((r for r in first if "error" not in r), None)
+        if near and near["lod_steps_in"]:
+            b.bar(range(1, len(near["lod_steps_in"]) + 1), near["lod_steps_in"])
+            b.set_xlabel("LOD step")
+            b.set_ylabel("patches evaluated")
+            b.set_title(f"patches per LOD step (distance {near['distance']})")
+        fig.suptitle(f"{result['device']}, {result['size'][0]}x{result['size'][1]}", fontsize=9)
+        fig.tight_layout()
+        p = out / f"{name}.png"
+        fig.savefig(p, dpi=90)
+        plt.close(fig)
+        paths.append(p)
+    return paths

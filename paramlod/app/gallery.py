@@ -1,0 +1,141 @@
+"""``paramlod gallery``: render every scene file of a folder to PNG and EXR (and an animated GIF for
+scenes with an [animation] table), with captions that state what was measured."""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from paramlod.errors import ParamlodError
+from paramlod.core.frame import write_atomically
+
+
+def add_arguments(p):
+    p.add_argument("--scenes", default="gallery", help="folder of .toml scenes (default gallery)")
+    p.add_argument("--out", default="gallery/images", help="output folder (default gallery/images)")
+    p.add_argument("--size", help="override every scene's size, e.g. 96x96")
+    p.add_argument("--only", nargs="+", metavar="NAME", help="render only these scenes (file stems)")
+
+
+def _aa(sf, variant: str, stats: dict) -> str:
+    if variant.startswith("tess"):
+        return stats.get("aa_effective", sf.settings.tess.aa)
+    if variant == "points-ssaa":
+        n = sf.settings.ssaa.ss
+        return f"{n * n}xSS (local framebuffer)"
+    return "noAA"
+
+
+def render_scene_file(path, size=None):
+    """(SceneFile, frames, variant label) for one scene file; several frames if animated."""
+    from paramlod.pipeline.composite import render_mixed
+    from paramlod.pipeline.driver import render
+    from paramlod.app.scenefile import load_scene
+
+    sf = load_scene(path, size=size)
+    camera = sf.camera
+    times = [sf.scene.time]
+    if sf.animation:
+        a = sf.animation
+        times = list(np.linspace(a["t0"], a["t1"], a["frames"], endpoint=False))
+    frames = []
+    for t in times:
+        sf.scene.time = float(t)
+        if sf.object_variants:
+            frames.append(render_mixed(sf.scene, camera, sf.object_variants, sf.settings, sf.settings.tess))
+        else:
+            frames.append(render(sf.scene, camera, variant=sf.variant, settings=sf.settings))
+    variant = "mixed (" + ", ".join(sorted(set(sf.object_variants))) + ")" if sf.object_variants else sf.variant
+    return sf, frames, variant
+
+
+def caption(sf, frame, variant: str, device: str, elapsed_ms: float) -> dict:
+    s = frame.stats
+    ms = s.get("ms", {})
+    patches = s.get("render_patches")
+    if patches is None and "parts" in s:
+        patches = sum(p.get("render_patches", 0) for p in s["parts"])
+    return {
+        "title": sf.meta.get("title", sf.path.stem),
+        "caption": sf.meta.get("caption", ""),
+        "variant": variant,
+        "aa": _aa(sf, sf.variant if not sf.object_variants else variant, s),
+        "size": list(frame.size),
+        "instances": sf.scene.instance_count,
+        "render_patches": patches,
+        "lod_ms": ms.get("lod"),
+        "render_ms": ms.get("render", ms.get("draw")),
+        "frame_ms": elapsed_ms,
+        "device": device,
+    }
+
+
+def _fmt(x, nd=1):
+    return "n/a" if x is None else f"{x:.{nd}f}"
+
+
+def markdown(captions: list[dict]) -> str:
+    lines = ["# Gallery", "", "Rendered by `paramlod gallery` from the scene files in `gallery/`; "
+             "each caption gives the variant, anti-aliasing, render patches, LOD and render times and the "
+             "device (OpenCL / OpenGL) that produced the image.", ""]
+    for c in captions:
+        lines += [f"## {c['title']}", "", f"![{c['title']}]({c['image']})", ""]
+        if c["caption"]:
+            lines += [c["caption"], ""]
+        lines += [f"{c['variant']}, {c['aa']}, {c['size'][0]}×{c['size'][1]}, {c['instances']:,} instances, "
+                  f"{c['render_patches'] if c['render_patches'] is not None else 'n/a'} render patches, "
+                  f"LOD {_fmt(c['lod_ms'])} ms, render {_fmt(c['render_ms'])} ms, whole frame {_fmt(c['frame_ms'])} ms "
+                  f"(first frame includes kernel compilation), on {c['device']}.", ""]
+    return "\n".join(lines)
+
+
+def run_gallery(args) -> int:
+    from tqdm import tqdm
+
+    from paramlod.app.cli import _size
+    from paramlod.device.context import cl_device
+
+    folder = Path(args.scenes)
+    files = sorted(folder.glob("*.toml"))
+    if args.only:
+        wanted = set(args.only)
+        missing = wanted - {f.stem for f in files}
+        if missing:
+            raise ParamlodError(f"no gallery scene named {', '.join(sorted(missing))} in {folder} "
+                                f"(available: {', '.join(f.stem for f in files)})")
+        files = [f for f in files if f.stem in wanted]
+    if not files:
+        raise ParamlodError(f"no .toml scenes in {folder}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    size = _size(args.size) if args.size else None
+    captions = []
+    bar = tqdm(files, unit="scene")
+    for f in bar:
+        bar.set_description(f.stem)
+        t0 = time.perf_counter()
+        sf, frames, variant = render_scene_file(f, size)
+        elapsed = (time.perf_counter() - t0) * 1e3 / len(frames)
+        frames[0].save(out / f"{f.stem}.png")
+        frames[0].save(out / f"{f.stem}.exr")
+        image = f"{f.stem}.png"
+        if len(frames) > 1:
+            from PIL import Image
+
+            imgs = [Image.fromarray(fr.rgb8()) for fr in frames]
+            dur = int(1000 / sf.animation["fps"])
+            write_atomically(out / f"{f.stem}.gif", lambda tmp: imgs[0].save(
+                tmp, format="GIF", save_all=True, append_images=imgs[1:], duration=dur, loop=0))
+            image = f"{f.stem}.gif"
+        device = cl_device().name
+        if variant.startswith("tess") or "tess" in variant:
+            device += " + " + str(frames[0].stats.get("device") or "OpenGL")
+        c = caption(sf, frames[-1], variant, device, elapsed)
+        c["image"] = image
+        captions.append(c)
+    write_atomically(out / "captions.json", lambda tmp: Path(tmp).write_text(json.dumps(captions, indent=2)))
+    write_atomically(out / "README.md", lambda tmp: Path(tmp).write_text(markdown(captions)))
+    print(f"{len(captions)} scene(s) rendered to {out}")
+    return 0

@@ -1,0 +1,349 @@
+"""TOML scene files: objects, camera and render settings, validated with messages that name the
+field and its line. Format: docs/scene-format.md."""
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from paramlod.core.camera import Camera
+from paramlod.errors import ParamlodError, SceneError
+from paramlod.lod.stage import LodSettings
+from paramlod.renderers.points import PointSettings
+from paramlod.pipeline.driver import VARIANTS, RenderSettings
+from paramlod.scene.scene import Material, Scene
+from paramlod.core.transforms import matrix as as_matrix, rotate, scale, translate
+
+TOP_KEYS = {"camera", "render", "objects", "meta", "animation"}
+CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
+RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches",
+               "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod"}
+OBJECT_KEYS = {"function", "params", "color", "specular", "translate", "rotate", "scale", "matrix", "variant",
+               "instances", "sh_field", "surfels"}
+ANIMATION_KEYS = {"frames", "t0", "t1", "fps"}
+
+
+@dataclass
+class SceneFile:
+    scene: Scene
+    camera: Camera
+    settings: RenderSettings
+    variant: str
+    path: Path
+    object_variants: list | None = None   # per object, when any object names its own variant
+    meta: dict | None = None               # [meta]: title, caption (the gallery uses them)
+    animation: dict | None = None          # [animation]: frames, t0, t1, fps
+
+
+class _Locator:
+    """Finds the line of a key in the TOML text, for error messages."""
+
+    def __init__(self, text: str):
+        self.lines = text.splitlines()
+
+    def line(self, table: str, index: int | None, key: str | None) -> int | None:
+        current, count = None, -1
+        for i, raw in enumerate(self.lines, 1):
+            s = raw.strip()
+            m = re.match(r"^\[\[\s*([\w.]+)\s*\]\]", s) or re.match(r"^\[\s*([\w.]+)\s*\]", s)
+            if m:
+                current = m.group(1)
+                if current == table and s.startswith("[["):
+                    count += 1
+                if key is None and current == table and (index is None or count == index):
+                    return i
+                continue
+            if current == table and (index is None or count == index) and key is not None:
+                if re.match(rf"^{re.escape(key)}\s*=", s):
+                    return i
+        return None
+
+
+class _Checker:
+    def __init__(self, path: Path, text: str):
+        self.path, self.loc = path, _Locator(text)
+
+    def fail(self, where: str, msg: str, table: str, index=None, key=None):
+        line = self.loc.line(table, index, key) or self.loc.line(table, index, None)
+        at = f"{self.path}:{line}" if line else str(self.path)
+        raise SceneError(f"{at}: {where}: {msg}")
+
+    def unknown(self, got: dict, allowed: set, where: str, table: str, index=None):
+        extra = sorted(set(got) - allowed)
+        if extra:
+            self.fail(f"{where}.{extra[0]}", f"unknown field (allowed: {', '.join(sorted(allowed))})",
+                      table, index, extra[0])
+
+    def vec(self, d, key, n, where, table, index=None, default=None):
+        if key not in d:
+            if default is None:
+                self.fail(f"{where}.{key}", "is required", table, index)
+            return default
+        v = d[key]
+        ok = isinstance(v, list) and len(v) == n and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        if not ok or not np.all(np.isfinite(v)):
+            self.fail(f"{where}.{key}", f"must be a list of {n} numbers, got {v!r}", table, index, key)
+        return [float(x) for x in v]
+
+    def num(self, d, key, where, table, index=None, default=None, lo=None, hi=None, integer=False):
+        if key not in d:
+            return default
+        v = d[key]
+        kind = int if integer else (int, float)
+        if not isinstance(v, kind) or isinstance(v, bool) or (lo is not None and v < lo) or (hi is not None and v > hi):
+            rng = f" in [{lo}, {hi}]" if lo is not None else ""
+            self.fail(f"{where}.{key}", f"must be {'an integer' if integer else 'a number'}{rng}, got {v!r}", table, index, key)
+        return v
+
+
+def load_scene(path, size=None) -> SceneFile:
+    """Read and validate a scene file; ``size`` (w, h) overrides the camera's size (a framing
+    camera is then framed for that size)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(f"scene file {path} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"cannot read scene file {path}: {exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path}: not valid TOML: {exc}") from None
+    ck = _Checker(path, text)
+    ck.unknown(data, TOP_KEYS, "scene", "", None)
+
+    cam_d = data.get("camera", {})
+    if not isinstance(cam_d, dict):
+        ck.fail("camera", "must be a table [camera]", "camera")
+    ck.unknown(cam_d, CAMERA_KEYS, "camera", "camera")
+    size = list(size) if size is not None else cam_d.get("size", [960, 540])
+    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(x, int) and 0 < x <= 16384 for x in size)):
+        ck.fail("camera.size", f"must be [width, height] in pixels, got {size!r}", "camera", None, "size")
+    r = data.get("render", {})
+    if not isinstance(r, dict):
+        ck.fail("render", "must be a table [render]", "render")
+    ck.unknown(r, RENDER_KEYS, "render", "render")
+    variant = r.get("variant", "points")
+    if variant not in VARIANTS:
+        ck.fail("render.variant", f"unknown variant {variant!r} (available: {', '.join(VARIANTS)})", "render", None, "variant")
+    th = r.get("threshold", 84.0)
+    if isinstance(th, (int, float)) and not isinstance(th, bool):
+        th = [th, th]
+    if not (isinstance(th, list) and len(th) == 2 and all(isinstance(x, (int, float)) and x > 0 for x in th)):
+        ck.fail("render.threshold", f"must be a positive number of pixels or [t_u, t_v], got {r.get('threshold')!r}", "render", None, "threshold")
+    grid = r.get("initial_grid", [1, 1])
+    if not (isinstance(grid, list) and len(grid) == 2 and all(isinstance(x, int) and 1 <= x <= 64 for x in grid)):
+        ck.fail("render.initial_grid", f"must be [gu, gv] with integers in 1..64, got {grid!r}", "render", None, "initial_grid")
+    settings = RenderSettings(
+        lod=LodSettings(threshold=(float(th[0]), float(th[1])),
+                        max_steps=ck.num(r, "max_steps", "render", "render", default=12, lo=1, hi=15, integer=True),
+                        initial_grid=tuple(grid),
+                        max_patches=ck.num(r, "max_patches", "render", "render", default=1 << 24, lo=1, integer=True)),
+        points=PointSettings(density=ck.num(r, "density", "render", "render", default=PointSettings.density, lo=0.1, hi=16)))
+    background = ck.vec(r, "background", 3, "render", "render", default=[0.12, 0.12, 0.14])
+    settings.tess = _tess_settings(r, ck)
+
+    scene = Scene(background=background)
+    objects = data.get("objects", [])
+    if not isinstance(objects, list) or not objects:
+        ck.fail("objects", "the scene needs at least one [[objects]] table", "objects")
+    for i, o in enumerate(objects):
+        where = f"objects[{i}]"
+        ck.unknown(o, OBJECT_KEYS, where, "objects", i)
+        if not {"sh_field", "surfels"} & set(o) and ("function" not in o or not isinstance(o["function"], str)):
+            ck.fail(f"{where}.function", "is required (a function name, see `paramlod functions`)", "objects", i)
+        params = o.get("params", {})
+        if not isinstance(params, dict):
+            ck.fail(f"{where}.params", "must be a table of name = value", "objects", i, "params")
+        ov = o.get("variant")
+        if ov is not None and not (ov in VARIANTS or (isinstance(ov, str) and ov.startswith("tess:"))):
+            ck.fail(f"{where}.variant", f"unknown variant {ov!r} (available: {', '.join(VARIANTS)}, "
+                    "or 'tess:<AA mode>')", "objects", i, "variant")
+        try:
+            m = _transform(o, ck, where, i)
+            mat = Material(color=tuple(ck.vec(o, "color", 3, where, "objects", i, default=[0.8, 0.8, 0.8])),
+                           specular=ck.num(o, "specular", where, "objects", i, default=0.25, lo=0, hi=1))
+            if "surfels" in o:
+                _add_surfels(scene, o["surfels"], path, m, mat, ck, where, i)
+            elif "sh_field" in o:
+                _add_sh_field(scene, o["sh_field"], path, m, mat, ck, where, i)
+            elif "instances" in o:
+                _add_instances(scene, o, params, path, m, mat, ck, where, i)
+            else:
+                scene.add(o["function"], params=params, transform=m, material=mat)
+        except SceneError as exc:
+            if str(exc).startswith(str(path)):
+                raise
+            ck.fail(where, str(exc), "objects", i)
+        except ParamlodError as exc:
+            key = "params" if "parameter" in str(exc) else "function"
+            ck.fail(f"{where}.{key}", str(exc), "objects", i, key)
+    camera = _camera(cam_d, size, scene, ck)
+    per = [o.get("variant", variant) for o in objects]
+    mixed = per if any("variant" in o for o in objects) and len(set(per)) > 1 else None
+    if mixed is None and any("variant" in o for o in objects):
+        variant = per[0]
+    try:   # `aa` holds for the point variant too, which supersamples only
+        settings.apply_aa(settings.tess.aa, points_only=mixed is None and variant == "points")
+    except SceneError as exc:
+        ck.fail("render.aa", str(exc), "render", None, "aa")
+    meta = data.get("meta", {})
+    if not isinstance(meta, dict):
+        ck.fail("meta", "must be a table [meta] (title, caption)", "meta")
+    anim = data.get("animation")
+    if anim is not None:
+        ck.unknown(anim, ANIMATION_KEYS, "animation", "animation")
+        anim = {"frames": ck.num(anim, "frames", "animation", "animation", default=8, lo=1, hi=240, integer=True),
+                "t0": ck.num(anim, "t0", "animation", "animation", default=0.0),
+                "t1": ck.num(anim, "t1", "animation", "animation", default=1.0),
+                "fps": ck.num(anim, "fps", "animation", "animation", default=8, lo=1, hi=60)}
+    return SceneFile(scene, camera, settings, variant, path, mixed, meta, anim)
+
+
+def _camera(cam_d: dict, size, scene, ck: _Checker) -> Camera:
+    """The [camera] table; without ``eye`` the camera frames the scene from ``direction``."""
+    fov = ck.num(cam_d, "fov_y", "camera", "camera", default=45.0, lo=1, hi=179)
+    up = ck.vec(cam_d, "up", 3, "camera", "camera", default=[0.0, 1.0, 0.0])
+    try:
+        if "eye" not in cam_d:
+            from paramlod.scene.framing import framing_camera
+
+            if "target" in cam_d or "near" in cam_d or "far" in cam_d:
+                ck.fail("camera", "target, near and far need an eye; without eye the camera frames the scene",
+                        "camera")
+            return framing_camera(
+                scene, ck.vec(cam_d, "direction", 3, "camera", "camera", default=[0.6, 0.45, 1.0]), up, fov, size,
+                ck.num(cam_d, "margin", "camera", "camera", default=1.1, lo=0.1, hi=10))
+        if "direction" in cam_d or "margin" in cam_d:
+            ck.fail("camera", "direction and margin are for a framing camera (no eye)", "camera")
+        return Camera.look_at(
+            ck.vec(cam_d, "eye", 3, "camera", "camera"),
+            ck.vec(cam_d, "target", 3, "camera", "camera", default=[0.0, 0.0, 0.0]), up,
+            fov_y=fov, size=size, near=ck.num(cam_d, "near", "camera", "camera", default=0.01, lo=1e-6),
+            far=ck.num(cam_d, "far", "camera", "camera", default=1000.0, lo=1e-6))
+    except SceneError as exc:
+        if str(exc).startswith(str(ck.path)):
+            raise
+        ck.fail("camera", str(exc).removeprefix("camera: "), "camera")
+
+
+def _import(spec: str):
+    """``"package.module:function"`` -> the function."""
+    import importlib
+
+    mod, _, name = spec.partition(":")
+    if not mod or not name:
+        raise SceneError(f"a builder is named 'package.module:function', got {spec!r}")
+    try:
+        return getattr(importlib.import_module(mod), name)
+    except (ImportError, AttributeError) as exc:
+        raise SceneError(f"cannot load builder {spec!r}: {exc}") from None
+
+
+def _add_instances(scene, o, params, path, m, mat, ck, where, i):
+    """``instances = { builder = "module:function", args = {...} }``: the builder returns the
+    instance arrays (count, params, per_instance, transforms, colors) of ``Scene.add_instances``."""
+    spec = o["instances"]
+    if not isinstance(spec, dict) or "builder" not in spec or set(spec) - {"builder", "args"}:
+        ck.fail(f"{where}.instances", 'must be { builder = "module:function", args = { ... } }', "objects", i, "instances")
+    try:
+        res = _import(spec["builder"])(**spec.get("args", {}))
+    except (TypeError, ValueError) as exc:
+        ck.fail(f"{where}.instances", f"builder {spec['builder']} failed: {exc}", "objects", i, "instances")
+    scene.add_instances(o["function"], res["count"], params={**res.get("params", {}), **params},
+                        per_instance=res.get("per_instance"), transforms=res.get("transforms"),
+                        transform=m, material=mat, colors=res.get("colors"))
+
+
+def _add_surfels(scene, spec, path, m, mat, ck, where, i):
+    """``surfels = { path = "x.surfels", px = 2 }`` (surfel size in pixels) or ``count = N``."""
+    from paramlod.surfels import FixedCount, FixedSize
+
+    if not isinstance(spec, dict) or "path" not in spec or set(spec) - {"path", "px", "count"} \
+            or ("px" in spec and "count" in spec):
+        ck.fail(f"{where}.surfels", 'must be { path = "x.surfels", px = 2 } or { path = ..., count = N }',
+                "objects", i, "surfels")
+    strategy = FixedCount(int(spec["count"])) if "count" in spec else FixedSize(float(spec.get("px", 2.0)))
+    scene.add_surfels((path.parent / spec["path"]).resolve(), transform=m, strategy=strategy,
+                      specular=mat.specular)
+
+
+def _add_sh_field(scene, spec, path, m, mat, ck, where, i):
+    """``sh_field = { path = "x.npz" | "x.nii.gz", basis = ..., color_by = ..., ... }``: a glyph
+    field from a file (paramlod.dmri), as one object of 'sh_glyph' instances."""
+    from paramlod import dmri
+
+    if not isinstance(spec, dict) or "path" not in spec:
+        ck.fail(f"{where}.sh_field", 'must be { path = "field.npz" or "sh.nii.gz", ... }', "objects", i, "sh_field")
+    spec = dict(spec)
+    file = (path.parent / spec.pop("path")).resolve()
+    load_keys = {"basis", "legacy", "stride"}
+    load = {k: spec.pop(k) for k in list(spec) if k in load_keys}
+    try:
+        if file.suffix == ".npz":
+            field = dmri.load_field_npz(file)
+        else:
+            field = dmri.load_sh_volume(file, **load)
+        field.to_scene(scene, transform=m, material=mat, **spec)
+    except TypeError as exc:
+        ck.fail(f"{where}.sh_field", str(exc), "objects", i, "sh_field")
+
+
+def _tess_settings(r: dict, ck: _Checker):
+    from paramlod.renderers.tess import TessSettings
+
+    ts = TessSettings()
+    if "aa" in r:
+        ts.aa = r["aa"]
+    levels = r.get("levels", "adaptive")
+    if levels == "adaptive":
+        ts.mode = "adaptive"
+    elif isinstance(levels, list) and len(levels) == 2 and all(isinstance(x, (int, float)) for x in levels):
+        ts.mode, ts.levels = "fixed", (float(levels[0]), float(levels[1]))
+    else:
+        ck.fail("render.levels", f'must be "adaptive" or [inner, outer], got {levels!r}', "render", None, "levels")
+    ts.l_min = ck.num(r, "l_min", "render", "render", default=ts.l_min, lo=1, hi=64)
+    ts.l_max = ck.num(r, "l_max", "render", "render", default=ts.l_max, lo=1, hi=64)
+    if "spacing" in r:
+        ts.spacing = r["spacing"]
+    if "msaa_lod" in r:
+        if not isinstance(r["msaa_lod"], bool):
+            ck.fail("render.msaa_lod", f"must be true or false, got {r['msaa_lod']!r}", "render", None, "msaa_lod")
+        ts.msaa_lod = r["msaa_lod"]
+    try:
+        ts.validate()
+    except ParamlodError as exc:
+        key = next((k for k in ("aa", "spacing", "l_min", "l_max") if k in r and k in str(exc)), "aa")
+        ck.fail(f"render.{key}", str(exc), "render", None, key)
+    return ts
+
+
+def _transform(o, ck: _Checker, where, i) -> np.ndarray:
+    if "matrix" in o:
+        if any(k in o for k in ("translate", "rotate", "scale")):
+            ck.fail(f"{where}.matrix", "give either matrix or translate/rotate/scale, not both", "objects", i, "matrix")
+        try:
+            return as_matrix(o["matrix"])
+        except (SceneError, ValueError, TypeError) as exc:
+            ck.fail(f"{where}.matrix", str(exc), "objects", i, "matrix")
+    m = np.eye(4)
+    if "translate" in o:
+        m = m @ translate(ck.vec(o, "translate", 3, where, "objects", i))
+    if "rotate" in o:
+        rot = o["rotate"]
+        ok = (isinstance(rot, list) and len(rot) == 2 and isinstance(rot[0], (int, float))
+              and isinstance(rot[1], list) and len(rot[1]) == 3)
+        if not ok:
+            ck.fail(f"{where}.rotate", f"must be [angle_degrees, [x, y, z]], got {rot!r}", "objects", i, "rotate")
+        m = m @ rotate(rot[0], rot[1])
+    if "scale" in o:
+        s = o["scale"]
+        if isinstance(s, (int, float)) and not isinstance(s, bool) and s > 0:
+            m = m @ scale(s)
+        else:
+            m = m @ scale(*ck.vec(o, "scale", 3, where, "objects", i))
+    return m

@@ -1,0 +1,178 @@
+"""``paramlod surfels sample | render | info`` (paramlod/cli.py calls add_subparser)."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from paramlod.errors import ParamlodError
+
+from paramlod.errors import SurfelError
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+        if not (0 < w <= 16384 and 0 < h <= 16384):
+            raise ValueError
+        return w, h
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must look like 512x512, got {text!r}") from None
+
+
+def _vec3(text: str) -> tuple[float, float, float]:
+    try:
+        v = tuple(float(x) for x in text.split(","))
+        if len(v) != 3 or not all(np.isfinite(v)):
+            raise ValueError
+        return v
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three numbers like 1,0.5,2, got {text!r}") from None
+
+
+def _check_output_folder(path: Path):
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise SurfelError(f"cannot write {path}: folder {folder} does not exist")
+
+
+def cmd_sample(args) -> int:
+    from paramlod.surfels.build.sampler import sample
+
+    out = Path(args.output)
+    _check_output_folder(out)  # fail before the sampling, not after it
+    s = sample(args.source, args.count, views=args.views, resolution=args.resolution, seed=args.seed,
+               progress=not args.quiet)
+    s.save(out)
+    note = ""
+    if len(s) < args.count:
+        note = (f" (only {len(s)} of {args.count}: every covered G-buffer pixel is taken; "
+                "raise --resolution for more)")
+    print(f"{out}: {len(s)} surfels{note}, packing {s.packing:.6g}, "
+          f"radius {float(s.radii[0]):.4g} .. {float(s.radii[-1]):.4g}, "
+          f"{s.meta['views']} views at {s.meta['resolution']}^2, {s.meta['rounds']} rounds")
+    return 0
+
+
+def _camera(args, surfels):
+    from paramlod.core.camera import Camera
+
+    from paramlod.surfels.render import default_camera
+
+    if args.eye is None:
+        cam = default_camera(surfels, args.size, fov_y=args.fov)
+        if args.target is None and args.up is None:
+            return cam
+        eye = cam.eye
+    else:
+        eye = np.asarray(args.eye)
+    c, r = surfels.bounding_sphere()
+    target = np.asarray(args.target) if args.target is not None else c
+    dist = float(np.linalg.norm(eye - target))
+    near = max(dist - 2 * r, dist * 1e-3) if dist > 2 * r else max(r * 1e-3, 1e-4)
+    return Camera.look_at(eye, target, up=args.up or (0, 1, 0), fov_y=args.fov, size=args.size,
+                          near=near, far=dist + 2 * r)
+
+
+def cmd_render(args) -> int:
+    from paramlod.surfels.format import SurfelSet
+    from paramlod.surfels.render import FixedCount, FixedSize, render_surfels
+
+    s = SurfelSet.load(args.surfels)
+    strategy = FixedCount(args.count) if args.count is not None else FixedSize(args.px if args.px is not None else 2.0)
+    frame = render_surfels(s, _camera(args, s), strategy)
+    outs = args.output
+    for out in outs:
+        frame.save(out)
+    st = frame.stats["surfels"]
+    size = "" if st["size_px"] is None else f" ({st['size_px']:g} px)"
+    sat = " (all surfels: the set is sparser than asked)" if st["saturated"] else ""
+    print(f"{', '.join(outs)}: prefix {st['prefix']} of {st['surfels']}{size}{sat}, disc radius "
+          f"{st['radius']:.4g}, {frame.stats['pixels_written']} pixels, {st['ms']:.1f} ms on {frame.stats['device']}")
+    if args.stats:
+        Path(args.stats).write_text(json.dumps(frame.stats, indent=2))
+    return 0
+
+
+def cmd_info(args) -> int:
+    from paramlod.surfels.format import SurfelSet
+
+    path = Path(args.surfels)
+    s = SurfelSet.load(path)
+    lo, hi = s.bounds
+    info = {
+        "file": str(path), "bytes": path.stat().st_size, "surfels": len(s), "packing": s.packing,
+        "radius_first": float(s.radii[0]), "radius_last": float(s.radii[-1]),
+        "bounds": [lo.tolist(), hi.tolist()],
+        "spacing": {str(n): s.spacing(n) for n in (100, 1000, 10000, 100000, len(s)) if n <= len(s)},
+        "meta": s.meta,
+    }
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"{path}: {len(s)} surfels, {info['bytes']} bytes")
+    print(f"  packing {s.packing:.6g} (spacing of a prefix of n: sqrt(packing / n))")
+    print(f"  insertion radius {info['radius_first']:.4g} (first) .. {info['radius_last']:.4g} (last)")
+    print(f"  bounds {np.array2string(lo, precision=4)} .. {np.array2string(hi, precision=4)}")
+    for n, r in info["spacing"].items():
+        print(f"  prefix {n:>8}: spacing {r:.4g}")
+    for k, v in sorted(s.meta.items()):
+        print(f"  {k}: {v}")
+    return 0
+
+
+def add_subparser(subparsers) -> argparse.ArgumentParser:
+    """Register ``surfels`` with its commands on an argparse subparsers object."""
+    p = subparsers.add_parser("surfels", help="blue surfels: sample a mesh or scene, render prefixes, inspect files",
+                              description="Blue surfels: progressive blue-noise sampling and the prefix renderer.")
+    sub = p.add_subparsers(dest="surfels_command", required=True, metavar="{sample,render,info}")
+
+    s = sub.add_parser("sample", help="sample N blue surfels of a mesh or a scene file into a .surfels file")
+    s.add_argument("source", help="mesh (.obj .ply .stl .glb .gltf .off) or scene file (.toml)")
+    s.add_argument("-n", "--count", type=int, required=True, help="number of surfels")
+    s.add_argument("-o", "--output", required=True, help="output .surfels file")
+    s.add_argument("--views", type=int, default=16, help="orthographic views on a Fibonacci sphere (1..32, default 16)")
+    s.add_argument("--resolution", type=int, default=512, help="G-buffer resolution per view (default 512)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the first sample (default 0)")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=cmd_sample)
+
+    r = sub.add_parser("render", help="render a prefix of a .surfels file to PNG or EXR")
+    r.add_argument("surfels", help=".surfels file")
+    g = r.add_mutually_exclusive_group()
+    g.add_argument("--px", type=float, help="surfel size in pixels at the object's distance (default 2)")
+    g.add_argument("--count", type=int, help="draw this many surfels instead")
+    r.add_argument("--size", type=_size, default=(512, 512), help="image size, e.g. 800x600 (default 512x512)")
+    r.add_argument("-o", "--output", action="append", required=True, help="output .png or .exr (repeatable)")
+    r.add_argument("--eye", type=_vec3, help="camera position x,y,z (default: a 3/4 view framing the set)")
+    r.add_argument("--target", type=_vec3, help="camera target x,y,z (default: the set's centre)")
+    r.add_argument("--up", type=_vec3, help="camera up vector (default 0,1,0)")
+    r.add_argument("--fov", type=float, default=35.0, help="vertical field of view in degrees (default 35)")
+    r.add_argument("--stats", help="write the frame statistics as JSON to this file")
+    r.set_defaults(func=cmd_render)
+
+    i = sub.add_parser("info", help="print what a .surfels file holds")
+    i.add_argument("surfels", help=".surfels file")
+    i.add_argument("--json", action="store_true", help="print JSON")
+    i.set_defaults(func=cmd_info)
+    return p
+
+
+def main(argv=None) -> int:
+    """Stand-alone entry (``python -m paramlod.surfels.cli ...``): the same commands without the
+    ``paramlod surfels`` prefix's global options."""
+    parser = argparse.ArgumentParser(prog="paramlod")
+    add_subparser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except ParamlodError as exc:
+        print(f"paramlod: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,113 @@
+"""Building OpenCL programs from kernels/ (plus generated source given as text), with a
+per-process cache and compiler errors that show the offending lines. Programs that include the
+generated code of parametric functions are built through ``paramlod.function.programs``."""
+from __future__ import annotations
+
+import re
+
+import pyopencl as cl
+
+from paramlod import kernels
+from paramlod.device.context import cl_device
+from paramlod.errors import FunctionError
+
+_cache: dict[tuple, object] = {}
+
+
+CL_LINE = r":(\d+):\d+:"              # clang-style 'file:LINE:COL:'
+GLSL_LINE = r"\b0[:(](\d+)[(:)]"        # Mesa '0:LINE(COL)', NVIDIA '0(LINE)'
+
+
+def context_lines(src: str, log: str, pattern: str = CL_LINE, around: int = 3) -> str:
+    """The generated lines (up to three places) that a compiler ``log`` complains about."""
+    lines = src.splitlines()
+    shown, seen = [], set()
+    for m in re.finditer(pattern, log):
+        ln = int(m.group(1))
+        if ln in seen or not 1 <= ln <= len(lines):
+            continue
+        seen.add(ln)
+        lo, hi = max(1, ln - around), min(len(lines), ln + around)
+        shown.append("\n".join(f"{'>' if i == ln else ' '}{i:5d} | {lines[i - 1]}" for i in range(lo, hi + 1)))
+        if len(shown) >= 3:
+            break
+    return "\n...\n".join(shown)
+
+
+def build(files: list[str], defines: dict | None = None, options: tuple = (), generated: str = "",
+          describe: str = "none"):
+    """Compile kernels/common/common.cl + ``generated`` + ``files`` (paths in kernels/);
+    ``options`` are extra compiler options; ``describe`` names the generated code's sources in
+    the error a failed compile raises."""
+    src = "\n".join([kernels.source("common/common.cl"), generated, *(kernels.source(f) for f in files)])
+    opts = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items())) + tuple(options)
+    dev = cl_device()
+    key = (src, opts, id(dev.context))
+    prog = _cache.get(key)
+    if prog is None:
+        try:
+            prog = cl.Program(dev.context, src).build(options=list(opts))
+        except cl.RuntimeError as exc:
+            log = str(exc)
+            raise FunctionError(
+                f"the generated OpenCL code does not compile (functions: {describe}).\n"
+                f"{context_lines(src, log)}\ncompiler said:\n{log[-2000:]}") from None
+        _cache[key] = prog
+    return prog
+
+
+_kernels: dict[tuple, object] = {}
+_timing: list | None = None   # kernel events of the current measurement, when one is running
+
+
+class TimedKernel:
+    """A cl.Kernel whose launches can be timed (``start_timing`` / ``stop_timing``): the benchmark
+    uses the summed kernel durations to separate device time from host (Python) time."""
+
+    def __init__(self, k):
+        self.k = k
+
+    def __call__(self, *args, **kw):
+        evt = self.k(*args, **kw)
+        if _timing is not None:
+            _timing.append(evt)
+        return evt
+
+    def __getattr__(self, name):
+        return getattr(self.k, name)
+
+
+def launch(queue, k, global_size, local_size=None):
+    """Enqueue a cl.Kernel whose arguments are already set (no per-launch argument conversion);
+    recorded like TimedKernel launches while a measurement runs."""
+    evt = cl.enqueue_nd_range_kernel(queue, k, global_size, local_size)
+    if _timing is not None:
+        _timing.append(evt)
+    return evt
+
+
+def start_timing() -> None:
+    global _timing
+    _timing = []
+
+
+def stop_timing() -> float:
+    """Milliseconds the recorded kernels ran on the device (waits for them)."""
+    global _timing
+    events, _timing = _timing or [], None
+    total = 0
+    for e in events:
+        e.wait()
+        total += e.profile.end - e.profile.start
+    return total * 1e-6
+
+
+def kernel(name: str, files: list[str], defines: dict | None = None, options: tuple = (), generated: str = "",
+           describe: str = "none"):
+    """A kernel object from ``build(files, defines, options, generated)``, retrieved once and reused."""
+    prog = build(files, defines, options, generated, describe)
+    key = (id(prog), name)
+    k = _kernels.get(key)
+    if k is None:
+        k = _kernels[key] = TimedKernel(cl.Kernel(prog, name))
+    return k

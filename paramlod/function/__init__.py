@@ -1,0 +1,1 @@
+"""Parametric functions: definition, code generation (OpenCL, GLSL), registry and plugins."""

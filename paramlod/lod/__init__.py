@@ -1,0 +1,1 @@
+"""The per-frame LOD stages (parametric patches) and their numpy twins."""

@@ -1,0 +1,151 @@
+"""numpy twin of the LOD stage (kernels/lod.cl), for tests and debugging.
+
+Same sample positions, same segment rules, same split patterns, in float32 where the kernel
+computes in float32 (parameter positions, projection). Function values come from numpy in float64
+and are rounded to float32, so screen lengths can differ from the kernel's in the last bits; a
+split decision can only differ where an extent lies within that rounding of the threshold.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, FLAG_FORCED, initial_patches
+
+F = np.float32
+
+
+def _project(scene_inst, functions, cam, inst, u, v):
+    """Screen position, state (0 front, 1 behind near plane, 2 bad) and outcode, per sample."""
+    inst_f, inst_u, params = scene_inst
+    shape = u.shape
+    pos = np.full(shape + (3,), np.nan, np.float32)
+    for i in np.unique(inst):
+        sel = inst == i
+        fn = functions[inst_u[i, 0]]
+        block = params[inst_u[i, 1]: inst_u[i, 1] + fn.param_count]
+        pos[sel] = fn.evaluate(u[sel].astype(np.float64), v[sel].astype(np.float64), block).astype(np.float32)
+    bad = ~np.all(np.isfinite(pos), axis=-1)
+    M = inst_f[inst, 0:16].reshape(shape + (4, 4))
+    p4 = np.concatenate([pos, np.ones(shape + (1,), np.float32)], axis=-1)
+    w = np.einsum("...ij,...j->...i", M[..., :3, :], p4)
+    view = cam[0:16].reshape(4, 4)
+    proj = cam[16:32].reshape(4, 4)
+    e = np.einsum("ij,...j->...i", view[:3, :], np.concatenate([w, np.ones(shape + (1,), np.float32)], axis=-1))
+    c = np.einsum("ij,...j->...i", proj, np.concatenate([e, np.ones(shape + (1,), np.float32)], axis=-1))
+    x, y, z, cw = c[..., 0], c[..., 1], c[..., 2], c[..., 3]
+    with np.errstate(invalid="ignore"):
+        code = ((x < -cw) * 1 | (x > cw) * 2 | (y < -cw) * 4 | (y > cw) * 8 | (z < -cw) * 16 | (z > cw) * 32).astype(np.uint32)
+        front = cw >= cam[34]
+        sx = (x / cw * F(0.5) + F(0.5)) * cam[32]
+        sy = (F(0.5) - y / cw * F(0.5)) * cam[33]
+    state = np.where(bad, 2, np.where(front, 0, 1))
+    code = np.where(bad, np.uint32(63), code)
+    s = np.stack([np.where(state == 0, sx, 0), np.where(state == 0, sy, 0)], axis=-1).astype(np.float32)
+    return s, state, code
+
+
+def _seg(s, state):
+    """Segment lengths along the last sample axis: NaN adds 0, behind the near plane is infinite."""
+    a, b = state[..., :-1], state[..., 1:]
+    d = np.linalg.norm(s[..., 1:, :] - s[..., :-1, :], axis=-1).astype(np.float32)
+    d = np.where((a == 1) | (b == 1), np.float32(np.inf), d)
+    return np.where((a == 2) | (b == 2), np.float32(0), d)
+
+
+def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
+    """One PATCH SUBDIVISION step. Returns (children, render patches, stats)."""
+    n = len(patches)
+    r = patches["range"].astype(np.float32)
+    u0, u1, v0, v1 = (r[:, i:i + 1] for i in range(4))
+    du, dv = u1 - u0, v1 - v0
+    inst = patches["inst"]
+    fk = ((np.arange(4, dtype=np.float32) + F(0.5)) * F(0.25))[None, :, None]
+    fi = (np.arange(8, dtype=np.float32) * F(1.0 / 7.0))[None, None, :]
+    # rows along u (n, 4, 8) and columns along v (n, 4, 8)
+    ru, rv = u0[:, :, None] + du[:, :, None] * fi, v0[:, :, None] + dv[:, :, None] * fk
+    ru, rv = np.broadcast_to(ru, (n, 4, 8)), np.broadcast_to(rv, (n, 4, 8))
+    cu, cv = u0[:, :, None] + du[:, :, None] * fk, v0[:, :, None] + dv[:, :, None] * fi
+    cu, cv = np.broadcast_to(cu, (n, 4, 8)), np.broadcast_to(cv, (n, 4, 8))
+    g = np.arange(5, dtype=np.float32) * F(0.25)
+    gu = u0[:, :, None] + du[:, :, None] * g[None, None, :]          # (n, 1, 5) over i
+    gv = v0[:, :, None] + dv[:, :, None] * g[None, :, None]          # (n, 5, 1) over j
+    gu, gv = np.broadcast_to(gu, (n, 5, 5)), np.broadcast_to(gv, (n, 5, 5))
+    ii = np.broadcast_to(inst[:, None, None], (n, 4, 8))
+    s_r, st_r, c_r = _project(scene_inst, functions, cam, ii, ru, rv)
+    s_c, st_c, c_c = _project(scene_inst, functions, cam, ii, cu, cv)
+    s_g, st_g, c_g = _project(scene_inst, functions, cam, np.broadcast_to(inst[:, None, None], (n, 5, 5)), gu, gv)
+
+    code = (np.bitwise_and.reduce(c_r.reshape(n, -1), axis=1) & np.bitwise_and.reduce(c_c.reshape(n, -1), axis=1)
+            & np.bitwise_and.reduce(c_g.reshape(n, -1), axis=1))
+    seg_u, seg_v = _seg(s_r, st_r), _seg(s_c, st_c)
+    eu = np.zeros((n, 4), np.float32)
+    ev = np.zeros((n, 4), np.float32)
+    for k in range(7):  # sequential float32 sums, as in the kernel
+        eu += seg_u[:, :, k]
+        ev += seg_v[:, :, k]
+    msu, msv = seg_u.max(axis=(1, 2)), seg_v.max(axis=(1, 2))
+    allpts = np.concatenate([s_r.reshape(n, -1, 2), s_c.reshape(n, -1, 2), s_g.reshape(n, -1, 2)], axis=1)
+    front = np.concatenate([st_r.reshape(n, -1), st_c.reshape(n, -1), st_g.reshape(n, -1)], axis=1) == 0
+    big = np.float32(np.inf)
+    bx0 = np.where(front, allpts[..., 0], big).min(axis=1)
+    by0 = np.where(front, allpts[..., 1], big).min(axis=1)
+    bx1 = np.where(front, allpts[..., 0], -big).max(axis=1)
+    by1 = np.where(front, allpts[..., 1], -big).max(axis=1)
+
+    culled = code != 0
+    tu, tv = F(t_u), F(t_v)
+    a = (eu[:, 0] > tu) | (eu[:, 1] > tu)
+    b = (eu[:, 2] > tu) | (eu[:, 3] > tu)
+    c = (ev[:, 0] > tv) | (ev[:, 1] > tv)
+    d = (ev[:, 2] > tv) | (ev[:, 3] > tv)
+    split = a | b | c | d
+    to_render = ~culled & (~split | bool(force))
+    rp = np.zeros(int(to_render.sum()), RENDER_DTYPE)
+    rp["range"] = r[to_render]
+    rp["bbox"] = np.stack([bx0, by0, bx1, by1], axis=1)[to_render]
+    rp["ext"] = np.stack([eu.max(axis=1), ev.max(axis=1), F(7) * msu, F(7) * msv], axis=1)[to_render]
+    rp["inst"] = inst[to_render]
+    rp["flags"] = step | np.where(split[to_render], FLAG_FORCED, 0)
+
+    children = []
+    sp = ~culled & split & (not force)
+    mu, mv = F(0.5) * (r[:, 0] + r[:, 1]), F(0.5) * (r[:, 2] + r[:, 3])
+    U0, U1, V0, V1 = r[:, 0], r[:, 1], r[:, 2], r[:, 3]
+    quad = sp & (a | b) & (c | d)
+    cases = [
+        (quad, [(U0, mu, V0, mv), (mu, U1, V0, mv), (U0, mu, mv, V1), (mu, U1, mv, V1)]),
+        (sp & ~quad & a & b, [(U0, mu, V0, V1), (mu, U1, V0, V1)]),
+        (sp & ~quad & c & d, [(U0, U1, V0, mv), (U0, U1, mv, V1)]),
+        (sp & ~quad & a & ~b, [(U0, mu, V0, mv), (mu, U1, V0, mv), (U0, U1, mv, V1)]),
+        (sp & ~quad & b & ~a, [(U0, U1, V0, mv), (U0, mu, mv, V1), (mu, U1, mv, V1)]),
+        (sp & ~quad & c & ~d & ~a & ~b, [(U0, mu, V0, mv), (U0, mu, mv, V1), (mu, U1, V0, V1)]),
+        (sp & ~quad & d & ~c & ~a & ~b, [(U0, mu, V0, V1), (mu, U1, V0, mv), (mu, U1, mv, V1)]),
+    ]
+    for mask, rects in cases:
+        for rect in rects:
+            ch = np.zeros(int(mask.sum()), EVAL_DTYPE)
+            ch["range"] = np.stack([x[mask] for x in rect], axis=1)
+            ch["inst"] = inst[mask]
+            children.append(ch)
+    children = np.concatenate(children) if children else np.zeros(0, EVAL_DTYPE)
+    stats = {"step": step, "in": n, "split": int(sp.sum()), "culled": int(culled.sum()),
+             "out": int(to_render.sum()), "forced": int((to_render & split).sum())}
+    return children, rp, stats
+
+
+def run_lod(scene, cam_record, settings, functions=None):
+    """The whole LOD stage in numpy: returns (render patches, per-step stats)."""
+    functions = functions or scene.functions()
+    inst = scene.instance_buffers()
+    patches = initial_patches(inst[0][:, 28:32], settings.initial_grid)
+    out, steps = [], []
+    for step in range(1, settings.max_steps + 1):
+        if len(patches) == 0:
+            steps.append({"step": step, "in": 0, "split": 0, "culled": 0, "out": 0, "forced": 0})
+            continue
+        patches, rp, st = lod_step(patches, inst, functions, cam_record.astype(np.float32),
+                                   settings.threshold[0], settings.threshold[1], step,
+                                   step == settings.max_steps)
+        out.append(rp)
+        steps.append(st)
+    return (np.concatenate(out) if out else np.zeros(0, RENDER_DTYPE)), steps

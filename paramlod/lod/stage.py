@@ -1,0 +1,224 @@
+"""The LOD stage driver: PATCH INITIALIZATION and up to ``max_steps`` PATCH SUBDIVISION steps
+in OpenCL (kernels/lod.cl), producing the render list for the renderers.
+
+Buffers grow when a step overflows them (the stage is redone), up to ``max_patches``; past that
+the stage stops with an error that names the limit. Nothing is dropped silently.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from paramlod.device.context import cl_device
+from paramlod.errors import CapacityError, SceneError
+from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, initial_patches
+from paramlod.device.programs import launch
+from paramlod.function.programs import build
+
+
+@dataclass
+class LodSettings:
+    threshold: tuple[float, float] = (84.0, 84.0)  # t_u, t_v in pixels
+    max_steps: int = 12
+    initial_grid: tuple[int, int] = (1, 1)
+    max_patches: int = 1 << 24   # per buffer (eval ping-pong and render list)
+
+    def validate(self):
+        tu, tv = self.threshold
+        if not (tu > 0 and tv > 0):
+            raise SceneError(f"lod threshold must be positive pixels, got {self.threshold}")
+        if not 1 <= self.max_steps <= 15:
+            raise SceneError(f"lod max_steps must be in 1..15, got {self.max_steps}")
+        gu, gv = self.initial_grid
+        if not (1 <= gu <= 64 and 1 <= gv <= 64):
+            raise SceneError(f"lod initial_grid must be in 1..64 per axis, got {self.initial_grid}")
+
+
+class _Buffer:
+    """A device buffer of records that can grow."""
+
+    def __init__(self, dtype, capacity):
+        self.dtype, self.capacity, self.buf = dtype, 0, None
+        self.ensure(capacity)
+
+    def ensure(self, n, keep=0):
+        import pyopencl as cl
+
+        if n <= self.capacity:
+            return False
+        cap = max(1024, 1 << int(np.ceil(np.log2(max(n, 1)))))
+        new = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, cap * self.dtype.itemsize)
+        if keep and self.buf is not None:
+            cl.enqueue_copy(cl_device().queue, new, self.buf, byte_count=keep * self.dtype.itemsize)
+        self.buf, self.capacity = new, cap
+        return True
+
+
+LOD_COUNTERS = 8  # per-step counter record in kernels/lod.cl
+C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED = range(5)
+LOD_RENDER_TOTAL = 1  # counters[0, 1]: the render list's length (kernels/lod.cl)
+LOD_LOCAL = 32        # work-items measuring one patch together (kernels/lod.cl)
+
+
+class LodStage:
+    def __init__(self, functions):
+        import pyopencl as cl
+
+        prog = build(["lod/lod.cl"], functions)
+        # one kernel object per step with its arguments bound once (they change only when a
+        # buffer grows or the scene, camera buffer or threshold changes): a frame only enqueues
+        self._step_kernels = [cl.Kernel(prog, "lod_step") for _ in range(15)]
+        self._bound = None
+        self.bufs = [_Buffer(EVAL_DTYPE, 4096), _Buffer(EVAL_DTYPE, 4096)]
+        self.render = _Buffer(RENDER_DTYPE, 4096)
+        # PATCH INITIALIZATION's output, built and uploaded only when the instances change
+        # (for 358,140 fiber instances that was ~30 ms of numpy and 11 MB of upload a frame)
+        self.init = _Buffer(EVAL_DTYPE, 4096)
+        self._init_for = (None, None, 0)
+        self.counters = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 16 * LOD_COUNTERS * 4)
+        # the counters at the start of a stage (initial patch count, zeros), kept on the device
+        self._start = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, 16 * LOD_COUNTERS * 4)
+        self._start_n = None
+        self._counts = np.zeros((16, LOD_COUNTERS), np.uint32)  # read back after it
+        self._max_steps = 0   # the settings' max_steps of the enqueued stage
+        self._steps_n = 0     # steps enqueued: the previous stage's depth plus one (see enqueue)
+        # per threshold (variants divide it differently): the last step that had input patches
+        # in the previous stage with it
+        self._depth: dict[tuple, int] = {}
+        self._depth_key = None
+        self.events = []   # the last enqueued stage's kernel events (device timing)
+        dev = cl_device()
+        # work-groups per step (they stride over the patches): enough to fill the device
+        self.max_groups = dev.device.max_compute_units * (64 if dev.is_gpu else 16)
+
+    def run(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
+        """Returns (render buffer, render patch count, per-step stats list, ms).
+
+        All steps are enqueued at once and the counters read back once; if a buffer overflowed,
+        the buffers grow and the whole stage is redone (growth persists across frames).
+        """
+        t0 = time.perf_counter()
+        while True:
+            self.enqueue(inst, domains, cam_buf, settings, t_div)
+            self.read_counters()
+            if not self.grow(settings):
+                break
+        n_render, steps = self.result()
+        return self.render.buf, n_render, steps, (time.perf_counter() - t0) * 1e3
+
+    def enqueue(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
+        """Enqueue the whole stage without waiting: the render list lands in ``self.render.buf``
+        and its length in ``self.counters[LOD_RENDER_TOTAL]`` on the device, for a renderer that
+        reads the count there. Then ``read_counters`` (waits), ``grow`` (True: enqueue the frame
+        again) and ``result``.
+
+        Only the steps the previous stage needed plus one are enqueued (a view changes little
+        between frames, and each step is a launch of Python and device time); if the last of them
+        still splits patches, ``grow`` asks for the stage again with all ``max_steps`` steps. Only
+        step ``max_steps`` forces its patches out, so nothing is rendered too coarse meanwhile."""
+        import pyopencl as cl
+
+        settings.validate()
+        q = cl_device().queue
+        src_domains, grid_for, n_init = self._init_for
+        if src_domains is not domains or grid_for != tuple(settings.initial_grid):
+            init = initial_patches(domains, settings.initial_grid)
+            n_init = len(init)
+            self._check(n_init, settings, "initial patches")
+            self.init.ensure(n_init)
+            if n_init:
+                cl.enqueue_copy(q, self.init.buf, init)
+            self._init_for = (domains, tuple(settings.initial_grid), n_init)
+        for b in self.bufs:
+            b.ensure(n_init)
+        max_steps = self._max_steps = settings.max_steps
+        tu, tv = (np.float32(t / t_div) for t in settings.threshold)
+        self._depth_key = (float(tu), float(tv), max_steps)
+        depth = self._depth.get(self._depth_key)
+        steps_n = self._steps_n = max_steps if depth is None else min(max_steps, depth + 1)
+        cap = min(b.capacity for b in self.bufs)
+        # the buffers themselves, not their ids: held here, they cannot be freed and their ids reused
+        bound = (*inst, cam_buf, float(tu), float(tv), max_steps, cap,
+                 *(b.buf for b in (self.init, *self.bufs, self.render)))
+        if bound != self._bound:
+            for step, k in enumerate(self._step_kernels[:max_steps], start=1):
+                src = self.init if step == 1 else self.bufs[(step - 1) % 2]
+                k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf,
+                           np.uint32(self.render.capacity), self.counters, *inst, cam_buf, tu, tv,
+                           np.uint32(step), np.uint32(step == max_steps))
+            self._bound = bound
+        if self._start_n != n_init:
+            start = np.zeros((16, LOD_COUNTERS), np.uint32)
+            start[0, C_CHILDREN] = n_init
+            cl.enqueue_copy(q, self._start, start)
+            self._start_n = n_init
+        # device-to-device: a write from host memory would make NVIDIA's driver wait here
+        cl.enqueue_copy(q, self.counters, self._start)
+        grid = (min(self.max_groups, max(cap, 1)) * LOD_LOCAL,)
+        self.events = [launch(q, k, grid, (LOD_LOCAL,)) for k in self._step_kernels[:steps_n]]
+
+    def read_counters(self):
+        """Wait for the enqueued stage and read its counters back."""
+        import pyopencl as cl
+
+        cl.enqueue_copy(cl_device().queue, self._counts, self.counters)
+
+    def grow(self, settings: LodSettings) -> bool:
+        """After the stage's read-back: grow the buffers that overflowed, or the step count if
+        the last enqueued step split patches; True if the stage must be enqueued again."""
+        counts = self._counts
+        n = self._steps_n
+        need = int(counts[1:n + 1, C_CHILDREN].max(initial=0))
+        n_render = int(counts[0, LOD_RENDER_TOTAL])
+        grew = False
+        if n < self._max_steps and counts[n, C_CHILDREN]:
+            self._depth.pop(self._depth_key)   # too few steps: the next stage runs all of them
+            grew = True
+        else:
+            fed = np.flatnonzero(counts[:n, C_CHILDREN])   # fed[i] + 1: a step that had input
+            self._depth[self._depth_key] = int(fed[-1]) + 1 if fed.size else 1
+        if need > min(b.capacity for b in self.bufs):
+            self._check(need, settings, "patches in one LOD step")
+            for b in self.bufs:
+                grew |= b.ensure(need)
+        if n_render > self.render.capacity:
+            self._check(n_render, settings, "render patches")
+            grew |= self.render.ensure(n_render)
+        return grew
+
+    def result(self) -> tuple[int, list[dict]]:
+        """(render patch count, per-step stats) of the last stage read back."""
+        counts = self._counts
+        steps = []
+        n_in = int(counts[0, C_CHILDREN])
+        for step in range(1, self._max_steps + 1):   # steps not enqueued had no input: zeros
+            c = counts[step]
+            steps.append({"step": step, "in": n_in, "split": int(c[C_SPLIT]), "culled": int(c[C_CULLED]),
+                          "out": int(c[C_RENDERED]), "forced": int(c[C_FORCED])})
+            n_in = int(c[C_CHILDREN])
+        return int(counts[0, LOD_RENDER_TOTAL]), steps
+
+    def device_ms(self) -> float:
+        """Device time of the last stage, first step start to last step end (after its sync)."""
+        if not self.events:
+            return 0.0
+        return (self.events[-1].profile.end - self.events[0].profile.start) * 1e-6
+
+    @staticmethod
+    def _check(n, settings, what):
+        if n > settings.max_patches:
+            raise CapacityError(
+                f"the LOD stage needs {n} {what}, more than max_patches={settings.max_patches}; "
+                "raise [lod] max_patches (memory: 64 bytes a render patch, 32 an evaluated one), raise the threshold, "
+                "or lower max_steps")
+
+    def read_render_list(self, n) -> np.ndarray:
+        import pyopencl as cl
+
+        out = np.empty(n, RENDER_DTYPE)
+        if n:
+            cl.enqueue_copy(cl_device().queue, out, self.render.buf)
+        return out
+

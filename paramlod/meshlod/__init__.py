@@ -1,0 +1,1 @@
+"""Mesh level of detail (cluster DAG, LOD chain, skinning): not built yet."""

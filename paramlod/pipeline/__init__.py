@@ -1,0 +1,1 @@
+"""One frame: settings, plan, passes, composite and the frame driver."""

@@ -1,0 +1,1 @@
+"""Scenes: objects, instances, flattening into the kernels' buffers, framing, loaders."""

@@ -1,0 +1,285 @@
+"""Scenes: objects (a function, its parameters, a transform and a material), instance arrays,
+composite parts, and the flat instance buffers the kernels read.
+
+An object may stand for many instances (``add_instances``): per-instance parameters and
+transforms are numpy arrays, so a 358,140-fiber curtain is built without a Python loop per
+instance. Parts declared by a function (``parts=[Part(...)]``) become child instances placed on
+the parent's surface frame, recomputed for the scene's ``time``.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from paramlod.errors import FunctionError, SceneError
+from paramlod.function.define import ParametricFunction
+from paramlod.function.registry import get_function
+from paramlod.core.transforms import matrix as _as_matrix
+
+# Per-instance float record (see kernels/common.cl, INST_* offsets): 4x4 model matrix (row-major),
+# 3x4 normal matrix rows, domain (u0, u1, v0, v1).
+INST_FLOATS = 32
+# Per-instance uint record: function index, parameter-block offset, object id, flags.
+INST_UINTS = 4
+MAX_OBJECTS = 4095   # object ids are carried in 12 bits of the aux key (docs/frame.md)
+MAX_PART_DEPTH = 4
+_versions = itertools.count(1)
+
+
+@dataclass
+class Material:
+    color: tuple[float, float, float] = (0.8, 0.8, 0.8)  # linear RGB
+    specular: float = 0.25
+
+    def __post_init__(self):
+        c = np.asarray(self.color, dtype=np.float64)
+        if c.shape != (3,) or not np.all((c >= 0) & (c <= 1)):
+            raise SceneError(f"material color must be three numbers in [0, 1], got {self.color!r}")
+        if not 0 <= self.specular <= 1:
+            raise SceneError(f"material specular must be in [0, 1], got {self.specular!r}")
+        self.color = tuple(float(x) for x in c)
+
+
+@dataclass
+class SceneObject:
+    function: ParametricFunction
+    params: dict                       # shared values (defaults for the rest)
+    transform: np.ndarray              # 4x4, applied after the per-instance transforms
+    material: Material
+    object_id: int
+    count: int = 1
+    per_instance: dict = field(default_factory=dict)   # name -> array [count] or [count, size]
+    transforms: np.ndarray | None = None               # [count, 4, 4] or None
+    colors: np.ndarray | None = None                   # [count, 3] linear RGB, or None
+
+
+@dataclass
+class SurfelObject:
+    """A blue-surfel set drawn as a view-dependent prefix (paramlod.surfels)."""
+
+    surfels: object            # paramlod.surfels.SurfelSet
+    transform: np.ndarray
+    strategy: object           # FixedSize (default 2 px), FixedCount or FrameTimeAdaptive
+    object_id: int
+    specular: float = 0.25
+
+
+def _param_columns(fn: ParametricFunction) -> dict[str, slice]:
+    cols, at = {}, 0
+    for p in fn.params:
+        cols[p.name] = slice(at, at + p.size)
+        at += p.size
+    return cols
+
+
+def _blocks(fn: ParametricFunction, shared: dict, per_instance: dict, count: int, time: float) -> np.ndarray:
+    """Parameter blocks [count, param_count] (float32)."""
+    shared = dict(shared)
+    if "t" in {p.name for p in fn.params} and "t" not in shared and "t" not in per_instance:
+        shared["t"] = time
+    base = fn.param_block(shared)
+    blocks = np.broadcast_to(base, (count, base.size)).copy()
+    cols = _param_columns(fn)
+    for name, arr in per_instance.items():
+        blocks[:, cols[name]] = arr.reshape(count, -1)
+    return blocks
+
+
+class Scene:
+    """Objects to render. Renderers keep the scene's buffers on the device between frames and send
+    them again when objects are added or ``time`` changes; after changing an object in place (its
+    transform, params, ...), call ``touch()``."""
+
+    def __init__(self, background=(0.12, 0.12, 0.14), time: float = 0.0):
+        self.objects: list[SceneObject] = []
+        self.surfels: list[SurfelObject] = []
+        self.background = tuple(float(x) for x in background)
+        self.time = float(time)
+        self._version = next(_versions)
+        self._cache = None
+
+    def add(self, fn_or_name, params: dict | None = None, transform=None, material: Material | None = None) -> SceneObject:
+        """Add one object; ``params`` override the function's defaults."""
+        return self.add_instances(fn_or_name, 1, params=params, transform=transform, material=material)
+
+    def add_instances(self, fn_or_name, count: int, params: dict | None = None, per_instance: dict | None = None,
+                      transforms=None, transform=None, material: Material | None = None,
+                      colors=None) -> SceneObject:
+        """Add ``count`` instances of one function as one object (one object id, one material).
+
+        ``per_instance`` maps parameter names to arrays with ``count`` rows; ``transforms`` is an
+        optional [count, 4, 4] array applied before ``transform``; ``colors`` an optional
+        [count, 3] array of linear RGB in [0, 1] that replaces the material colour per instance.
+        """
+        fn = get_function(fn_or_name)
+        if self.object_count >= MAX_OBJECTS:
+            raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits); "
+                             "use add_instances for many copies of one function")
+        count = int(count)
+        if count < 1:
+            raise SceneError(f"'{fn.name}': instance count must be at least 1, got {count}")
+        params = dict(params or {})
+        for name, val in params.items():
+            try:
+                np.asarray(val, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise FunctionError(f"function '{fn.name}': parameter '{name}' must be a number or a list "
+                                    f"of numbers, got {val!r}") from None
+        fn.param_block(params)  # validates names, shapes and finiteness of the shared values
+        per = {}
+        known = {p.name: p for p in fn.params}
+        for name, arr in (per_instance or {}).items():
+            if name not in known:
+                raise SceneError(f"'{fn.name}' has no parameter '{name}' (its parameters: {', '.join(known) or 'none'})")
+            a = np.asarray(arr, dtype=np.float32)
+            want = (count,) if not known[name].is_array else (count, known[name].size)
+            if a.shape != want:
+                raise SceneError(f"'{fn.name}': per-instance '{name}' must have shape {want}, got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise SceneError(f"'{fn.name}': per-instance '{name}' has non-finite values")
+            per[name] = a
+        if transforms is not None:
+            transforms = np.asarray(transforms, dtype=np.float64)
+            if transforms.shape != (count, 4, 4) or not np.all(np.isfinite(transforms)):
+                raise SceneError(f"'{fn.name}': transforms must be a finite [{count}, 4, 4] array, got {transforms.shape}")
+        if colors is not None:
+            colors = np.asarray(colors, dtype=np.float32)
+            if colors.shape != (count, 3) or not np.all((colors >= 0) & (colors <= 1)):
+                raise SceneError(f"'{fn.name}': colors must be a [{count}, 3] array of values in [0, 1]")
+        m = np.eye(4) if transform is None else _as_matrix(transform)
+        obj = SceneObject(fn, params, m, material or Material(), self.object_count + 1, count, per, transforms,
+                          colors)
+        self.objects.append(obj)
+        self.touch()
+        return obj
+
+    def touch(self) -> None:
+        """Mark the scene as changed: renderers upload its buffers again on the next frame.
+        (Versions are unique across scenes, so a renderer never mistakes one scene for another.)"""
+        self._version = next(_versions)
+
+    def add_surfels(self, path_or_set, transform=None, strategy=None, specular: float = 0.25) -> SurfelObject:
+        """Add a ``.surfels`` file or SurfelSet; ``strategy`` picks the prefix each frame
+        (paramlod.surfels.FixedSize(2) by default, FixedCount, FrameTimeAdaptive)."""
+        from paramlod.surfels.format import load_surfels
+        from paramlod.surfels.render import FixedSize
+
+        if self.object_count >= MAX_OBJECTS:
+            raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits)")
+        m = np.eye(4) if transform is None else _as_matrix(transform)
+        obj = SurfelObject(load_surfels(path_or_set), m, strategy or FixedSize(), self.object_count + 1, specular)
+        self.surfels.append(obj)
+        self.touch()
+        return obj
+
+    @property
+    def object_count(self) -> int:
+        return len(self.objects) + len(self.surfels)
+
+    @property
+    def instance_count(self) -> int:
+        """Parametric instances, parts included (surfel objects not counted)."""
+        return sum(len(models) for _, models, _, _, _ in self._expanded())
+
+    def functions(self) -> list[ParametricFunction]:
+        """Distinct functions, parts included, in first-use order; the index is the kernel's id."""
+        out: list[ParametricFunction] = []
+
+        def visit(fn, depth):
+            if all(fn is not f for f in out):
+                out.append(fn)
+            if depth < MAX_PART_DEPTH:
+                for part in getattr(fn, "parts", ()):
+                    visit(get_function(part.function), depth + 1)
+
+        for o in self.objects:
+            visit(o.function, 0)
+        return out
+
+    # --- flattening ------------------------------------------------------------------------
+    def _expanded(self):
+        """Groups (function, model matrices [n,4,4], blocks [n,k], object id, materials [n,4])."""
+        groups = []
+
+        def place(fn, models, blocks, oid, mat, depth):
+            groups.append((fn, models, blocks, oid, mat))
+            if depth >= MAX_PART_DEPTH:
+                return
+            for part in getattr(fn, "parts", ()):
+                child = get_function(part.function)
+                u, v = part.at
+                frames = np.stack([fn.surface_frame(u, v, b) for b in blocks])
+                local = np.asarray(part.transform if part.transform is not None else np.eye(4), np.float64)
+                cmodels = models @ frames @ local
+                # parameters named in part.inherit (default: t) flow from each parent instance
+                cparams, inherited = dict(part.params or {}), {}
+                pcols, cdefs = _param_columns(fn), {p.name: p for p in child.params}
+                for name in getattr(part, "inherit", ("t",)):
+                    if name in cdefs and name in pcols and name not in cparams:
+                        col = blocks[:, pcols[name]]
+                        inherited[name] = col if cdefs[name].is_array else col[:, 0]
+                cblocks = _blocks(child, cparams, inherited, len(blocks), self.time)
+                cmat = mat.copy()
+                if getattr(part, "color", None) is not None:
+                    cmat[:, :3] = part.color
+                place(child, cmodels, cblocks, oid, cmat, depth + 1)
+
+        for o in self.objects:
+            models = np.broadcast_to(o.transform, (o.count, 4, 4))
+            if o.transforms is not None:
+                models = o.transform @ o.transforms
+            mats = np.tile(np.array([*o.material.color, o.material.specular], np.float32), (o.count, 1))
+            if o.colors is not None:
+                mats[:, :3] = o.colors
+            place(o.function, np.asarray(models, np.float64),
+                  _blocks(o.function, o.params, o.per_instance, o.count, self.time),
+                  o.object_id, mats, 0)
+        return groups
+
+    def instance_buffers(self):
+        """(inst_f float32 [n, 32], inst_u uint32 [n, 4], params float32 [...]) for the kernels."""
+        key = (self._version, self.time)
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
+        funcs = self.functions()
+        groups = self._expanded()
+        inst_f, inst_u, params, mats = [], [], [], []
+        offset = 0
+        for fn, models, blocks, oid, mat in groups:
+            n = len(models)
+            f = np.zeros((n, INST_FLOATS), np.float32)
+            f[:, 0:16] = models.reshape(n, 16)
+            lin = models[:, :3, :3]
+            if np.any(np.abs(np.linalg.det(lin)) < 1e-20):
+                raise SceneError(f"'{fn.name}': an instance transform is singular")
+            nrm = np.transpose(np.linalg.inv(lin), (0, 2, 1))
+            f[:, 16:28] = np.concatenate([nrm, np.zeros((n, 3, 1))], axis=2).reshape(n, 12)
+            f[:, 28:32] = [*fn.u_range, *fn.v_range]
+            u = np.zeros((n, INST_UINTS), np.uint32)
+            u[:, 0] = next(k for k, g in enumerate(funcs) if g is fn)
+            k = blocks.shape[1]
+            u[:, 1] = offset + np.arange(n, dtype=np.int64) * k
+            u[:, 2] = oid
+            offset += n * k
+            inst_f.append(f)
+            inst_u.append(u)
+            params.append(blocks.reshape(-1))
+            mats.append(mat)
+        if not groups:
+            inst_f.append(np.zeros((0, INST_FLOATS), np.float32))
+            inst_u.append(np.zeros((0, INST_UINTS), np.uint32))
+            mats.append(np.zeros((0, 4), np.float32))
+        if offset >= 2 ** 32:
+            raise SceneError("the scene's parameter blocks exceed 2^32 floats")
+        result = (np.concatenate(inst_f), np.concatenate(inst_u),
+                  np.concatenate(params + [np.zeros(1, np.float32)]).astype(np.float32))
+        self._materials = np.ascontiguousarray(np.concatenate(mats))
+        self._cache = (key, result)
+        return result
+
+    def materials(self) -> np.ndarray:
+        """float32 [n, 4]: linear RGB and specular per instance."""
+        self.instance_buffers()
+        return self._materials

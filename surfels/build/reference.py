@@ -1,0 +1,266 @@
+"""numpy twins of kernels/surfels_sample.cl (bit-identical on small G-buffers: the tests compare
+every pass and whole sampling runs), and of the sampler's round loop."""
+from __future__ import annotations
+
+import numpy as np
+
+ALL_ONES = np.uint64(0xFFFFFFFFFFFFFFFF)
+HI = np.uint64(0xFFFFFFFF00000000)
+
+
+def dist2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared distances in float32 in the kernel's order: (dx*dx + dy*dy) + dz*dz."""
+    a = np.asarray(a, np.float32)
+    b = np.asarray(b, np.float32)
+    d = a[..., :3] - b[..., :3]
+    return (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
+
+
+def f32_bits(x) -> np.ndarray:
+    return np.asarray(x, np.float32).view(np.uint32).astype(np.uint64)
+
+
+def key_r2(key) -> np.ndarray:
+    """The float32 squared radius in a key's high half."""
+    return (np.asarray(key, np.uint64) >> np.uint64(32)).astype(np.uint32).view(np.float32)
+
+
+def key_pixel(key) -> np.ndarray:
+    return (np.asarray(key, np.uint64) & np.uint64(0xFFFFFFFF)).astype(np.int64)
+
+
+def voronoi_splat(vor, pos, samples, first, count, r2):
+    """atom_min of (d2 bits << 32 | site) into every covered pixel within sqrt(r2) of each site."""
+    vor = vor.copy()
+    valid = np.flatnonzero(pos[:, 3] > 0)
+    P = pos[valid]
+    r2 = np.float32(r2)
+    for site in range(first, first + count):
+        d2 = dist2(P, pos[key_pixel(samples[site])])
+        m = d2 <= r2
+        keys = (f32_bits(d2[m]) << np.uint64(32)) | np.uint64(site)
+        np.minimum.at(vor, valid[m], keys)
+    return vor
+
+
+def farthest(vor, pos, n_sites):
+    """(cand, uncovered): each site's farthest pixel key; covered pixels no site reached."""
+    cand = np.zeros(n_sites, np.uint64)
+    reached = vor != ALL_ONES
+    q = np.flatnonzero(reached)
+    keys = (vor[q] & HI) | q.astype(np.uint64)
+    np.maximum.at(cand, key_pixel(vor[q]), keys)
+    uncovered = int(np.count_nonzero(~reached & (pos[:, 3] > 0)))
+    return cand, uncovered
+
+
+def conflict_splat(pos, cand, thr2):
+    """atom_max of each eligible candidate's key into the pixels strictly inside its disc."""
+    conf = np.zeros(len(pos), np.uint64)
+    valid = np.flatnonzero(pos[:, 3] > 0)
+    P = pos[valid]
+    r2s = key_r2(cand)
+    for key, r2 in zip(cand, r2s):
+        if not (r2 >= np.float32(thr2) and r2 > 0):
+            continue
+        m = dist2(P, pos[key_pixel(key)]) < r2
+        np.maximum.at(conf, valid[m], np.full(int(m.sum()), key, np.uint64))
+    return conf
+
+
+def survive(cand, thr2, conf):
+    r2 = key_r2(cand)
+    ok = (r2 >= np.float32(thr2)) & (r2 > 0)
+    own = np.zeros(len(cand), bool)
+    own[ok] = conf[key_pixel(cand[ok])] == cand[ok]
+    return np.where(ok & own, cand, np.uint64(0))
+
+
+def compact_sort(out):
+    """Survivors in site order, then stably sorted by decreasing radius (the radix sort)."""
+    s = out[out != 0]
+    hi = (s >> np.uint64(32)).astype(np.uint32)
+    return s[np.argsort(~hi, kind="stable")]
+
+
+def seed_pixel(pos, seed):
+    valid = np.flatnonzero(pos[:, 3] > 0)
+    return int(valid[np.random.default_rng(seed).integers(len(valid))])
+
+
+def loop(pos, samples, vor, n, target, stop_r2=0.0, fix_first_radius=False, threshold=0.75):
+    """Rounds as Sampler.loop: (keys, last r2max); ``samples`` has room for ``target`` keys."""
+    from paramlod.surfels.build.sampler import splat_r2, threshold_r2
+
+    first = fix_first_radius
+    while True:
+        cand, _ = farthest(vor, pos, n)
+        mx = cand.max()
+        r2max = key_r2(mx)
+        if first:
+            samples[0] = (mx & HI) | samples[0]
+            first = False
+        if n >= target or not r2max > stop_r2:
+            break
+        thr2 = threshold_r2(r2max, threshold)
+        conf = conflict_splat(pos, cand, thr2)
+        srt = compact_sort(survive(cand, thr2, conf))
+        take = min(len(srt), target - n)
+        if take == 0:
+            break
+        samples[n:n + take] = srt[:take]
+        vor = voronoi_splat(vor, pos, samples, n, take, splat_r2(r2max))
+        n += take
+    return samples[:n].copy(), r2max
+
+
+def sample(pos, target, seed_pixel, threshold=0.75):
+    """One level from a given first pixel (Sampler.run)."""
+    samples = np.zeros(target, np.uint64)
+    samples[0] = np.uint64(seed_pixel)
+    vor = voronoi_splat(np.full(len(pos), ALL_ONES), pos, samples, 0, 1, np.float32(np.inf))
+    return loop(pos, samples, vor, 1, target, 0.0, True, threshold)[0]
+
+
+def run_levels(gbuf, target, seed=0, threshold=0.75):
+    """The coarse-to-fine loop of sampler.run_levels, in numpy."""
+    from paramlod.surfels.build.sampler import handover_r2, level_strides, remap_keys, resume_radii, stop_r2
+
+    strides = level_strides(gbuf.views.resolution)
+    pixel = gbuf.views.pixel_size
+    keys = r2max = prev = None
+    for stride in strides:
+        g = gbuf.subsample(stride)
+        pos = np.ascontiguousarray(g.position.reshape(-1, 4), np.float32)
+        if stride != 1 and not np.any(pos[:, 3] > 0):
+            continue
+        samples = np.zeros(target, np.uint64)
+        if keys is None:
+            samples[0] = np.uint64(seed_pixel(pos, seed))
+            vor = voronoi_splat(np.full(len(pos), ALL_ONES), pos, samples, 0, 1, np.float32(np.inf))
+            n = 1
+        else:
+            k = remap_keys(keys, gbuf.shape, prev, stride)
+            n = len(k)
+            samples[:n] = k
+            for r2 in resume_radii(handover_r2(r2max, prev, pixel)):
+                vor = voronoi_splat(np.full(len(pos), ALL_ONES), pos, samples, 0, n, r2)
+                if farthest(vor, pos, n)[1] == 0:
+                    break
+        last = stride == 1
+        keys, r2max = loop(pos, samples, vor, n, target, 0.0 if last else stop_r2(stride, pixel),
+                           keys is None, threshold)
+        prev = stride
+        if len(keys) >= target:
+            return remap_keys(keys, gbuf.shape, stride, 1)
+    return keys
+
+
+# --- prefix renderer (kernels/surfels_splat.cl) ----------------------------------------------------
+def _f(x):
+    return np.float32(x)
+
+
+def _rows_point(m, p):
+    """((m0 x + m1 y) + m2 z) + m3 per row, float32, p (..., 3)."""
+    m = np.asarray(m, np.float32)
+    x, y, z = p[..., 0], p[..., 1], p[..., 2]
+    return np.stack([((m[4 * r] * x + m[4 * r + 1] * y) + m[4 * r + 2] * z) + m[4 * r + 3] for r in range(3)], -1)
+
+
+def _rows_dir(m, d):
+    m = np.asarray(m, np.float32)
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    return np.stack([(m[4 * r] * x + m[4 * r + 1] * y) + m[4 * r + 2] * z for r in range(3)], -1)
+
+
+def _dot(a, b):
+    return (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]) + a[..., 2] * b[..., 2]
+
+
+def _unproject(ip, x, y, z):
+    ip = np.asarray(ip, np.float32)
+    h = [((ip[4 * r] * x + ip[4 * r + 1] * y) + ip[4 * r + 2] * z) + ip[4 * r + 3] for r in range(4)]
+    return np.stack([h[0] / h[3], h[1] / h[3], h[2] / h[3]], -1)
+
+
+def _oct10(n):
+    s = np.abs(n).sum(-1, keepdims=True)
+    p = n[..., :2] / s
+    neg = n[..., 2] < 0
+    sgn = np.where(p >= 0, 1.0, -1.0)
+    q = np.stack([(1 - np.abs(p[..., 1])) * sgn[..., 0], (1 - np.abs(p[..., 0])) * sgn[..., 1]], -1)
+    p = np.where(neg[..., None], q, p)
+    u = np.clip(p * 511.5 + 511.5 + 0.5, 0, 1023).astype(np.uint64)
+    return (u[..., 0] << np.uint64(10)) | u[..., 1]
+
+
+def _srgb8(x):
+    x = np.clip(x, 0.0, 1.0)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return (s * 255.0 + 0.5).astype(np.uint64)
+
+
+def view_dir(cam, e):
+    """float64 twin of common.cl view_dir(): towards the viewer, (0, 0, 1) for orthographic."""
+    e = np.asarray(e, np.float64)
+    if cam[16 + 15] != 0:
+        return np.broadcast_to(np.array([0.0, 0.0, 1.0]), e.shape)
+    return -e / np.linalg.norm(e, axis=-1, keepdims=True)
+
+
+def shade(n_view, ev, mat, light):
+    """float64 twin of keys.cl shade(): (sRGB RGBA8 word, viewer-facing unit normal)."""
+    n_view = np.asarray(n_view, np.float64)
+    ln = np.linalg.norm(n_view, axis=-1, keepdims=True)
+    n = np.where(ln > 1e-30, n_view / np.where(ln > 0, ln, 1), ev)
+    n = np.where(_dot(n, ev)[..., None] < 0, -n, n)
+    L = np.asarray(light[:3], np.float64)
+    amb = float(light[3])
+    diff = np.maximum(_dot(n, np.broadcast_to(L, n.shape)), 0.0)
+    hv = L + ev
+    hv /= np.linalg.norm(hv, axis=-1, keepdims=True)
+    spec = mat[3] * np.power(np.maximum(_dot(n, hv), 0.0), 48.0)
+    rgb = np.asarray(mat[:3], np.float64) * (amb + (1 - amb) * diff)[..., None] + spec[..., None]
+    c = _srgb8(rgb)
+    return (c[..., 0] << np.uint64(24)) | (c[..., 1] << np.uint64(16)) | (c[..., 2] << np.uint64(8)) | np.uint64(255), n
+
+
+def splat_discs(pos4, nrm4, albedo4, n, radius, xf, cam, inv_proj, light, specular, object_id):
+    """(colour keys, aux keys), uint64 (H, W): the discs of the first n surfels, atom_min'd into
+    cleared buffers. Coverage and depth bits follow the kernel's float32 operations exactly;
+    colour and normal bits are float64 (they may differ by one unit)."""
+    W, H = int(cam[32]), int(cam[33])
+    near, far = _f(cam[34]), _f(cam[35])
+    V = np.asarray(cam[0:16], np.float64)
+    ck = np.full(H * W, ALL_ONES)
+    ak = np.full(H * W, ALL_ONES)
+    ys, xs = np.divmod(np.arange(H * W), W)
+    ny = _f(1) - (ys.astype(np.float32) + _f(0.5)) / _f(H) * _f(2)
+    nx = (xs.astype(np.float32) + _f(0.5)) / _f(W) * _f(2) - _f(1)
+    o = _unproject(inv_proj, nx, ny, _f(-1))
+    d = _unproject(inv_proj, nx, ny, _f(1)) - o
+    r = _f(radius)
+    r2 = r * r
+    with np.errstate(all="ignore"):
+        for i in range(n):
+            e = _rows_point(xf[:12], pos4[i, :3].astype(np.float32))
+            nv = _rows_dir(xf[12:24], nrm4[i, :3].astype(np.float32))
+            den = _dot(d, nv)
+            t = _dot(e - o, nv) / den
+            h = o + t[:, None] * d
+            dh = h - e
+            depth = -h[:, 2]
+            hit = (den != 0) & (_dot(dh, dh) <= r2) & (depth >= near) & (depth <= far)
+            if -e[2] - r > far or -e[2] + r < near:
+                hit[:] = False
+            q = np.flatnonzero(hit)
+            if not len(q):
+                continue
+            mat = np.array([*albedo4[i, :3], specular], np.float64)
+            rgba, nn = shade(nv.astype(np.float64), view_dir(cam, h[q]), mat, light)
+            nw = nn @ V.reshape(4, 4)[:3, :3]
+            dbits = depth[q].view(np.uint32).astype(np.uint64) << np.uint64(32)
+            np.minimum.at(ck, q, dbits | rgba)
+            np.minimum.at(ak, q, dbits | (_oct10(nw) << np.uint64(12)) | np.uint64(object_id & 0xFFF))
+    return ck.reshape(H, W), ak.reshape(H, W)
