@@ -27,7 +27,7 @@ from paramlod import parametric
 from paramlod.dsl import cross, dot, let, normalize, vec3
 from paramlod.errors import FunctionError
 
-from paramlod.functions.yarn import CRANE, CURTAIN_LOOPS, CURTAIN_ROWS, curtain_layout, yarn_frame
+from .yarn import CRANE, CURTAIN_LOOPS, CURTAIN_ROWS, curtain_layout, yarn_frame
 
 FIBER = {"a": CRANE["a"], "h": CRANE["h"], "d": CRANE["d"], "r": 0.5, "omega": 5.0, "phi": 0.0, "radius": 0.3}
 

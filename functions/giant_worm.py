@@ -24,11 +24,10 @@ import math
 
 from sympy import cos, pi, sin
 
-from paramlod import parametric, translate
+from paramlod import Part, parametric, translate
 from paramlod.dsl import bezier, bezier_derivative, cross, let, normalize, vec3
-from paramlod.function.define import Part
 
-from paramlod.functions.giant_worm_parts import giant_worm_jaw_inner, giant_worm_jaw_outer, giant_worm_tongue
+from .giant_worm_parts import giant_worm_jaw_inner, giant_worm_jaw_outer, giant_worm_tongue
 
 INNER_COLOR = (0.55, 0.2, 0.22)
 TONGUE_COLOR = (0.75, 0.18, 0.25)

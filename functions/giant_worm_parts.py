@@ -20,11 +20,10 @@ from __future__ import annotations
 import numpy as np
 from sympy import cos, pi, sin
 
-from paramlod import parametric
+from paramlod import Part, parametric
 from paramlod.dsl import let
-from paramlod.function.define import Part
 
-from paramlod.functions.cone import cone
+from .cone import cone
 
 JAW = {"length": 1.6, "width": 1.0, "bend": 1.05, "curl": 0.35, "open_deg": 35.0}
 TOOTH_COLOR = (0.86, 0.82, 0.68)

@@ -21,6 +21,10 @@ Registered functions: ``sh_glyph`` (order 12, descoteaux07) and ``sh_glyph_tourn
 tournier07), each with one parameter, the array ``coeffs`` (91 floats, default: a glyph with a lobe
 along z and a weaker one along x; ``pad_coefficients`` zero-pads
 a shorter, lower-order set). ``make_sh_glyph(order, basis)`` builds a cheaper lower-order glyph.
+
+The bookkeeping (counts, ``sh_index``, ``order_of``, ``pad_coefficients``, ``convert_basis``, the
+bases and orders) is ``paramlod.dmri.sh``'s, re-exported here; this module holds only the symbolic
+series the glyph is compiled from. Errors are ``ShError``, a FunctionError (and a DmriError).
 """
 from __future__ import annotations
 
@@ -31,63 +35,10 @@ import numpy as np
 import sympy as sp
 
 from paramlod import parametric
+from paramlod.dmri.sh import check_basis, check_order, coefficient_count, sh_index
+from paramlod.dmri.sh import BASES, SH_ORDERS as ORDERS, convert_basis, order_of  # noqa: F401 (re-exported)
+from paramlod.dmri.sh import pad_to_order as pad_coefficients  # noqa: F401 (re-exported)
 from paramlod.dsl import let
-from paramlod.errors import FunctionError
-
-BASES = ("descoteaux07", "tournier07")
-ORDERS = (0, 2, 4, 6, 8, 10, 12)
-
-
-def coefficient_count(order: int) -> int:
-    """Number of even-band coefficients up to ``order``: (order+1)(order+2)/2."""
-    return (order + 1) * (order + 2) // 2
-
-
-def sh_index(l: int, m: int) -> int:
-    """Position of (l, m) in the coefficient vector (dipy's ordering, even l only)."""
-    return l * (l + 1) // 2 + m
-
-
-def order_of(n_coeffs: int) -> int:
-    """The order whose basis has ``n_coeffs`` coefficients."""
-    for order in ORDERS:
-        if coefficient_count(order) == n_coeffs:
-            return order
-    counts = ", ".join(str(coefficient_count(o)) for o in ORDERS)
-    raise FunctionError(f"sh_glyph: {n_coeffs} coefficients is not a full even-band SH set (expected one of {counts})")
-
-
-def pad_coefficients(coeffs, order: int = 12) -> np.ndarray:
-    """Zero-pad a full lower-order coefficient set (e.g. 45 for order 8) to ``order`` (91 for 12)."""
-    c = np.asarray(coeffs, dtype=np.float64).reshape(-1)
-    if order_of(c.size) > order:
-        raise FunctionError(f"sh_glyph: {c.size} coefficients (order {order_of(c.size)}) do not fit order {order}")
-    out = np.zeros(coefficient_count(order))
-    out[:c.size] = c  # lower orders come first in dipy's ordering
-    return out
-
-
-def convert_basis(coeffs, source: str, target: str) -> np.ndarray:
-    """Coefficients of the same function in the other basis (descoteaux07 <-> tournier07, non-legacy).
-
-    Works on the last axis, so a whole [..., n] array converts at once.
-    """
-    for b in (source, target):
-        if b not in BASES:
-            raise FunctionError(f"sh_glyph: unknown basis '{b}' (known: {', '.join(BASES)})")
-    c = np.asarray(coeffs, dtype=np.float64)
-    if source == target:
-        return c.copy()
-    order = order_of(c.shape[-1])
-    out = c.copy()
-    for l in range(2, order + 1, 2):
-        for m in range(1, l + 1):
-            pos, neg = sh_index(l, m), sh_index(l, -m)
-            if source == "descoteaux07":   # sin part: D[l,+m] -> T[l,-m]; cos part: (-1)^m D[l,-m] -> T[l,+m]
-                out[..., neg], out[..., pos] = c[..., pos], (-1) ** m * c[..., neg]
-            else:
-                out[..., pos], out[..., neg] = c[..., neg], (-1) ** m * c[..., pos]
-    return out
 
 
 def _legendre(order: int, x, s) -> dict:
@@ -108,8 +59,7 @@ def _legendre(order: int, x, s) -> dict:
 
 def sh_radius(coeffs, theta, phi, order: int, basis: str):
     """The SH series r(theta, phi) as a sympy expression of the coefficient symbols."""
-    if basis not in BASES:
-        raise FunctionError(f"sh_glyph: unknown basis '{basis}' (known: {', '.join(BASES)})")
+    check_basis(basis)
     x, s = let(sp.cos(theta)), let(sp.sin(theta))
     P = _legendre(order, x, s)
     c1, s1 = let(sp.cos(phi)), let(sp.sin(phi))
@@ -150,10 +100,8 @@ def default_coefficients(order: int) -> list[float]:
 def make_sh_glyph(order: int = 12, basis: str = "descoteaux07", name: str | None = None):
     """An SH glyph function of even ``order`` (0..12) in ``basis``; cached, so equal arguments give
     the same object. Its parameter ``coeffs`` has (order+1)(order+2)/2 floats."""
-    if order not in ORDERS:
-        raise FunctionError(f"sh_glyph: order must be one of {ORDERS}, got {order!r}")
-    if basis not in BASES:
-        raise FunctionError(f"sh_glyph: unknown basis '{basis}' (known: {', '.join(BASES)})")
+    check_order(order)
+    check_basis(basis)
     fname = name or f"sh_glyph_o{order}_{basis}"
 
     @parametric(u=(0, sp.pi), v=(0, 2 * sp.pi), params={"coeffs": default_coefficients(order)}, name=fname)

@@ -16,7 +16,7 @@ from sympy import cos, exp, pi
 from paramlod import parametric
 from paramlod.dsl import smoothstep
 
-from paramlod.functions.johis_heart import heart_shape
+from .johis_heart import heart_shape
 
 
 @parametric(u=(0, pi), v=(0, 2 * pi),

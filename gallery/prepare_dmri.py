@@ -42,7 +42,7 @@ def _recipes() -> dict[str, str]:
     return {
         "small64d_csa_o8.npz": f"csa order=8 smooth=0.006 small_64D dipy={dipy.__version__}",
         "synthetic_140x140_o12.npz": f"synthetic nx=140 ny=140 order=12 seed=0 subtract_min=1 "
-                                     f"evals={list(dmri.SYNTHETIC_EVALS)} sphere={dmri._SYN_SPHERE}",
+                                     f"evals={list(dmri.SYNTHETIC_EVALS)} sphere={dmri.SYNTHESIS_SPHERE}",
     }
 
 

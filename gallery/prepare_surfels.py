@@ -4,7 +4,7 @@ import argparse
 import importlib.resources
 from pathlib import Path
 
-from paramlod.surfels import sample_mesh
+from paramlod.surfels.build import sample_mesh
 
 OUT = Path(__file__).parent / "data" / "bunny.surfels"
 

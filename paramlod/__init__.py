@@ -1,20 +1,22 @@
 """paramlod: parametric objects and surfels rendered with per-frame level of detail."""
+from paramlod import dsl, surfels  # noqa: F401  (surfels registers its object kind and renderer)
+from paramlod.core.camera import Camera
+from paramlod.core.frame import Frame, FrameStats
+from paramlod.core.transforms import matrix, rotate, scale, translate
 from paramlod.errors import CapacityError, DeviceError, FunctionError, ParamlodError, SceneError
 from paramlod.function.define import ParametricFunction, Part, evaluate, parametric
-from paramlod import dsl
-from paramlod.core.camera import Camera
-from paramlod.scene.scene import Material, Scene
-from paramlod.core.transforms import matrix, rotate, scale, translate
-from paramlod.core.frame import Frame
 from paramlod.lod.stage import LodSettings
-from paramlod.renderers.points import PointSettings
+from paramlod.pipeline.driver import render, render_on_device
+from paramlod.pipeline.settings import RenderSettings
 from paramlod.renderers.points_lfb import SsaaSettings
+from paramlod.renderers.registry import variants
+from paramlod.renderers.sampling import PointSettings
 from paramlod.renderers.tess import TessSettings
-from paramlod.pipeline.driver import RenderSettings, render
+from paramlod.scene.scene import Material, Scene
 
 __all__ = [
     "CapacityError", "DeviceError", "FunctionError", "ParamlodError", "SceneError",
     "ParametricFunction", "Part", "dsl", "evaluate", "parametric", "Camera", "Material", "Scene",
-    "matrix", "rotate", "scale", "translate", "Frame", "LodSettings", "PointSettings",
-    "SsaaSettings", "TessSettings", "RenderSettings", "render",
+    "matrix", "rotate", "scale", "translate", "Frame", "FrameStats", "LodSettings", "PointSettings",
+    "SsaaSettings", "TessSettings", "RenderSettings", "render", "render_on_device", "variants",
 ]

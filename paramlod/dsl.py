@@ -16,12 +16,11 @@ from typing import Callable, Sequence
 import numpy as np
 import sympy as sp
 
-__all__ = [
-    "let", "where", "step", "clamp", "saturate", "smoothstep", "mix", "fract", "mod",
-    "vec3", "dot", "cross", "length", "normalize", "rotate",
-    "bezier", "bezier_derivative", "frenet_frame", "tube",
-    "hash01", "noise", "fbm",
-]
+from paramlod.function.bindings import current_bindings, suspend_bindings
+from paramlod.function.define import DSL_HELPERS
+
+# the list lives with the definition code, whose error hints name these helpers
+__all__ = list(DSL_HELPERS)
 
 
 # --- named intermediate values ---------------------------------------------------------------------
@@ -33,8 +32,6 @@ def let(expr, name: str | None = None):
     (forward mode, through each binding) all work on the bound pieces instead of one huge
     expression tree. Outside a body it returns ``expr`` unchanged. Vectors bind per component.
     """
-    from paramlod.function.define import current_bindings
-
     if _is_vec(expr):
         return sp.Matrix([let(e, name) for e in _vec(expr)])
     e = sp.sympify(expr)
@@ -206,8 +203,6 @@ def bezier_derivative(points: Sequence, t, order: int = 1):
 def _curve_derivatives(curve, t):
     """(c(t), c'(t), c''(t)) for a callable curve or an expression vector in the symbol ``t``."""
     if callable(curve):
-        from paramlod.function.define import suspend_bindings
-
         s = sp.Dummy("s", real=True)
         with suspend_bindings():  # the curve's expression is differentiated and rewritten below
             c = _vec(curve(s))
@@ -310,5 +305,5 @@ def fbm(x, y=0, z=0, octaves: int = 4, lacunarity: float = 2.0, gain: float = 0.
 
 
 def _curve_helpers() -> dict[str, Callable]:
-    """Name -> helper, for error messages that suggest a helper (function.py uses it)."""
+    """Name -> helper (every name of ``__all__``)."""
     return {n: globals()[n] for n in __all__}

@@ -10,8 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paramlod.core.frame import write_atomically
-
+from paramlod.core.files import write_atomically
 from paramlod.errors import SurfelError
 
 FORMAT = "paramlod.surfels"

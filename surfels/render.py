@@ -14,8 +14,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import pyopencl as cl
+
+from paramlod.core.camera import Camera
+from paramlod.core.color import srgb_to_linear
+from paramlod.core.frame import FrameStats
+from paramlod.core.layouts import camera_record
 from paramlod.device.context import cl_device
 from paramlod.device.programs import kernel
+from paramlod.renderers.registry import ObjectKind, RendererSpec, register_kind, register_renderer
+from paramlod.renderers.shading import LIGHT
+from paramlod.renderers.targets import KeyBuffer
+from paramlod.scene.loaders import register_loader
 
 from paramlod.errors import SurfelError
 from paramlod.surfels.format import SurfelSet, load_surfels
@@ -133,10 +143,6 @@ def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None) -> 
 
 class _DeviceSurfels:
     def __init__(self, s: SurfelSet):
-        import pyopencl as cl
-
-        from paramlod.surfels.build.sources import srgb_to_linear
-
         n = len(s)
         pos = np.zeros((n, 4), np.float32)
         pos[:, :3] = s.positions
@@ -161,48 +167,93 @@ def draw_records(camera, transform):
     return xf, np.linalg.inv(camera.projection).astype(np.float32).reshape(-1)
 
 
+class _Splat:
+    """One surfel object's splat in flight: its kernel event and counters."""
+
+    def __init__(self, choice, strategy, n_surfels, radius_view, event, counters, cbuf):
+        self.choice, self.strategy, self.n_surfels, self.radius_view = choice, strategy, n_surfels, radius_view
+        self.event, self.counters, self.cbuf = event, counters, cbuf
+
+    def stats(self) -> dict:
+        ms = (self.event.profile.end - self.event.profile.start) * 1e-6
+        return {**self.choice, "radius_view": float(self.radius_view), "surfels": self.n_surfels, "ms": ms,
+                **{k: int(v) for k, v in zip(COUNTERS, self.counters)}}
+
+
+class SurfelSplats:
+    """The "surfels" renderer: each surfel object's prefix splatted into the shared key buffers
+    (composed by depth with the point variants). Device copies of the sets are kept here, per
+    scene, not on the sets."""
+
+    def __init__(self, functions=(), record: bool = False):
+        self._device: dict[int, tuple] = {}   # id(SurfelSet) -> (the set, its device copy)
+        self.objects, self.camera, self._splats = [], None, []
+
+    def device_copy(self, surfels: SurfelSet) -> _DeviceSurfels:
+        held = self._device.get(id(surfels))
+        if held is None or held[0] is not surfels:
+            held = self._device[id(surfels)] = (surfels, _DeviceSurfels(surfels))
+        return held[1]
+
+    def prepare(self, scene, camera, settings):
+        self.objects, self.camera = list(scene.surfels), camera
+
+    def enqueue(self, target, settings=None):
+        self._splats = [self.splat(target, self.camera, so.surfels, so.strategy or FixedSize(), so.transform,
+                                   so.object_id, so.specular)
+                        for so in self.objects]
+
+    def splat(self, keys, camera, surfels, strategy, transform, object_id, specular, light=None) -> _Splat:
+        """Enqueue the splat of one set's prefix into ``keys`` (no wait)."""
+        if (keys.width, keys.height) != tuple(camera.size):
+            raise SurfelError(f"the key buffer is {keys.width}x{keys.height} but the camera is "
+                              f"{camera.size[0]}x{camera.size[1]}")
+        if not 0 <= int(object_id) <= 0xFFF:
+            raise SurfelError(f"object_id must be in 0..4095 (12 bits of the aux key), got {object_id}")
+        transform = np.eye(4) if transform is None else np.asarray(transform, np.float64)
+        if transform.shape != (4, 4) or not np.all(np.isfinite(transform)) or abs(np.linalg.det(transform[:3, :3])) < 1e-12:
+            raise SurfelError("surfel transform must be a finite, invertible 4x4 matrix")
+        choice = choose_prefix(surfels, camera, strategy, transform)
+        dev = self.device_copy(surfels)
+        q, ctx = cl_device().queue, cl_device().context
+        xf, inv_proj = draw_records(camera, transform)
+        mf = cl.mem_flags
+        small = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in
+                 (xf, camera_record(camera), inv_proj, np.asarray(LIGHT if light is None else light, np.float32))]
+        counters = np.zeros(len(COUNTERS), np.uint64)
+        cbuf = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=counters)
+        n = choice["prefix"]
+        radius_view = np.float32(choice["radius"] * _scale(transform))
+        k = kernel("surfels_splat", ["common/keys.cl", "surfels/surfels_splat.cl"], options=EXACT_DIVISION)
+        evt = k(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view, *small,
+                np.float32(specular), np.uint32(object_id), keys.color, keys.aux, cbuf)
+        return _Splat(choice, strategy, len(surfels), radius_view, evt, counters, cbuf)
+
+    def collect(self):
+        for s in self._splats:
+            cl.enqueue_copy(cl_device().queue, s.counters, s.cbuf, is_blocking=False)
+
+    def grow(self, settings) -> bool:
+        for s in self._splats:   # after the frame's wait: the strategies see their draw times
+            s.strategy.observe(s.stats()["ms"])
+        return False
+
+    def stats(self) -> dict:
+        return {"surfels": [s.stats() for s in self._splats]}
+
+
 def draw_surfels(keys, camera, surfels, strategy=None, transform=None, object_id: int = 1,
                  specular: float = 0.25, light=None) -> dict:
     """Splat the prefix that ``strategy`` (default: FixedSize(2)) asks for into ``keys`` (a cleared
-    or partly drawn paramlod.framebuffer.KeyBuffer); returns stats. The caller resolves."""
-    import pyopencl as cl
-
-    from paramlod.pipeline.driver import LIGHT, camera_record
-
-    surfels = load_surfels(surfels)
-    if (keys.width, keys.height) != tuple(camera.size):
-        raise SurfelError(f"the key buffer is {keys.width}x{keys.height} but the camera is "
-                          f"{camera.size[0]}x{camera.size[1]}")
-    if not 0 <= int(object_id) <= 0xFFF:
-        raise SurfelError(f"object_id must be in 0..4095 (12 bits of the aux key), got {object_id}")
-    transform = np.eye(4) if transform is None else np.asarray(transform, np.float64)
-    if transform.shape != (4, 4) or not np.all(np.isfinite(transform)) or abs(np.linalg.det(transform[:3, :3])) < 1e-12:
-        raise SurfelError("surfel transform must be a finite, invertible 4x4 matrix")
-    strategy = strategy or FixedSize()
-    choice = choose_prefix(surfels, camera, strategy, transform)
-    dev = surfels.__dict__.get("_device")
-    if dev is None:
-        dev = surfels.__dict__["_device"] = _DeviceSurfels(surfels)
-    q = cl_device().queue
-    ctx = cl_device().context
-    xf, inv_proj = draw_records(camera, transform)
-    mf = cl.mem_flags
-    small = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in
-             (xf, camera_record(camera), inv_proj, np.asarray(LIGHT if light is None else light, np.float32))]
-    counters = np.zeros(len(COUNTERS), np.uint64)
-    cbuf = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=counters)
-    n = choice["prefix"]
-    radius_view = np.float32(choice["radius"] * _scale(transform))
-    t0 = time.perf_counter()
-    kernel("surfels_splat", ["common/keys.cl", "surfels/surfels_splat.cl"], options=EXACT_DIVISION)(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view,
-                  *small, np.float32(specular), np.uint32(object_id), keys.color, keys.aux, cbuf)
-    cl.enqueue_copy(q, counters, cbuf)
-    q.finish()
-    ms = (time.perf_counter() - t0) * 1e3
-    strategy.observe(ms)
-    stats = {**choice, "radius_view": float(radius_view), "surfels": len(surfels), "ms": ms,
-             **{k: int(v) for k, v in zip(COUNTERS, counters)}}
-    return stats
+    or partly drawn paramlod.renderers.targets.KeyBuffer) and wait; returns stats. The caller
+    resolves."""
+    r = SurfelSplats()
+    s = r.splat(keys, camera, load_surfels(surfels), strategy or FixedSize(), transform, object_id, specular, light)
+    r._splats = [s]
+    r.collect()
+    cl_device().queue.finish()
+    r.grow(None)
+    return s.stats()
 
 
 def _round_up(n, m):
@@ -211,8 +262,6 @@ def _round_up(n, m):
 
 def default_camera(surfels: SurfelSet, size=(512, 512), fov_y: float = 35.0, direction=(1.0, 0.6, 1.4)):
     """A perspective camera that frames the set's bounding sphere from ``direction``."""
-    from paramlod.core.camera import Camera
-
     c, r = surfels.bounding_sphere()
     d = np.asarray(direction, np.float64)
     d /= np.linalg.norm(d)
@@ -227,17 +276,20 @@ def default_camera(surfels: SurfelSet, size=(512, 512), fov_y: float = 35.0, dir
 def render_surfels(path_or_set, camera=None, strategy=None, size=(512, 512), transform=None,
                    background=(0.12, 0.12, 0.14)):
     """Render one surfel set alone: -> paramlod.Frame (stats in frame.stats)."""
-    from paramlod.renderers.targets import KeyBuffer
-
     surfels = load_surfels(path_or_set)
     camera = camera or default_camera(surfels, size)
     t0 = time.perf_counter()
     keys = KeyBuffer(*camera.size)
     keys.clear()
     stats = draw_surfels(keys, camera, surfels, strategy, transform)
-    frame = keys.resolve()
-    frame.background = tuple(background)
-    frame.stats = {"device": cl_device().name, "variant": "surfels", "size": list(camera.size),
-                   "surfels": stats, "pixels_written": int(np.count_nonzero(np.isfinite(frame.depth))),
-                   "ms": {"render": stats["ms"], "total": (time.perf_counter() - t0) * 1e3}}
+    frame = keys.resolve(background)
+    frame.stats = FrameStats({"device": cl_device().name, "variant": "surfels", "size": list(camera.size),
+                              "surfels": stats, "pixels_written": keys.counts["pixels_written"],
+                              "ms": {"render": stats["ms"], "total": (time.perf_counter() - t0) * 1e3}})
     return frame
+
+
+register_kind(ObjectKind("surfels", lambda scene: scene.surfels, "surfels"))
+register_renderer(RendererSpec("surfels", "surfels", SurfelSplats, "points", "keys", object,
+                               "prefixes of blue-surfel sets splatted with atom_min into the key buffers"))
+register_loader("surfels", load_surfels)

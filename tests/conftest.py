@@ -51,7 +51,7 @@ def record_direct_points(settings, size):
     from paramlod.device.context import cl_device
     from paramlod.renderers.targets import KeyBuffer
     from paramlod.renderers.points import DirectPointRenderer, grid_counts
-    from paramlod.pipeline.driver import renderer_for
+    from helpers.stages import ParametricStage as renderer_for
 
     scene = pl.Scene()
     scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
@@ -75,3 +75,34 @@ def record_direct_points(settings, size):
                      record_args=(off.data, pix.data, key.data))
     color, _ = keys.read_keys()
     return stats, color.reshape(-1), pix.get(), key.get(), total
+
+
+# --- stored-reference images (tests/test_reference_images.py) ---------------------------------
+
+import contextlib  # noqa: E402
+
+
+def pytest_addoption(parser):
+    parser.addoption("--regen-refs", action="store_true", default=False,
+                     help="rewrite the stored reference images in tests/refs/ instead of comparing")
+
+
+@pytest.fixture(scope="session")
+def regen_refs(request):
+    """None when comparing; with --regen-refs, a list the reference tests add each file they
+    wrote to, reported at the end of the session."""
+    if not request.config.getoption("--regen-refs"):
+        yield None
+        return
+    written = []
+    yield written
+    lines = [f"--regen-refs wrote {len(written)} reference file(s):"] + [f"  {p}" for p in written]
+    plugins = request.config.pluginmanager
+    reporter, capture = plugins.get_plugin("terminalreporter"), plugins.get_plugin("capturemanager")
+    with capture.global_and_fixture_disabled() if capture else contextlib.nullcontext():
+        if reporter is not None:
+            reporter.write_line("")
+            for line in lines:
+                reporter.write_line(line)
+        else:
+            print("\n".join(lines))

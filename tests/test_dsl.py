@@ -252,6 +252,16 @@ def test_let_gives_the_same_surface_with_smaller_code():
     assert len(bindings) > 3 and len(outputs) == 9   # derivative bindings follow the value bindings
 
 
+def test_the_helper_list_is_the_modules_public_functions():
+    """``dsl.__all__`` (the list the definition code's hints name) is exactly the public helpers."""
+    import inspect
+
+    public = {n for n, f in vars(dsl).items() if not n.startswith("_") and inspect.isfunction(f)
+              and f.__module__ == dsl.__name__}
+    assert sorted(dsl.__all__) == sorted(public)
+    assert len(set(dsl.__all__)) == len(dsl.__all__)
+
+
 # --- snippets ------------------------------------------------------------------------------------
 def test_snippet_functions_match_their_reference_on_opencl():
     u, v = grid(ripple_snippet, 33)

@@ -6,7 +6,8 @@ from hypothesis import given, settings, strategies as st
 import paramlod as pl
 from paramlod.lod.reference import lod_step, run_lod
 from paramlod.lod.patches import FLAG_FORCED, EVAL_DTYPE, sort_key
-from paramlod.pipeline.driver import camera_record, renderer_for
+from paramlod.core.layouts import camera_record
+from helpers.stages import ParametricStage as renderer_for  # a scene's LOD stage and buffers
 
 CAMERAS = [
     ((0, 0, 6), (0, 0, 0)),
@@ -16,9 +17,9 @@ CAMERAS = [
 ]
 
 
-def cl_render_list(scene, camera, lod=None):
+def cl_render_list(scene, camera, lod=None, stage=None):
     lod = lod or pl.LodSettings()
-    r = renderer_for(scene)
+    r = stage or renderer_for(scene)
     dev = r.upload(scene, camera)
     _, n, steps, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], lod)
     return r.lod.read_render_list(n), steps
@@ -57,10 +58,11 @@ def test_stage_follows_the_view_from_far_to_near_and_back():
     lod = pl.LodSettings(threshold=(30.0, 30.0))
     far = pl.Camera.look_at((0, 0, 40), (0, 0, 0), size=(320, 240))
     near = pl.Camera.look_at((0, 0.3, 1.4), (0, 0, 0), size=(320, 240))
-    stage = renderer_for(scene).lod
+    owner = renderer_for(scene)
+    stage = owner.lod
     depths = []
     for cam in (far, near, near, far):
-        got, steps = cl_render_list(scene, cam, lod)
+        got, steps = cl_render_list(scene, cam, lod, owner)
         ref, ref_steps = run_lod(scene, camera_record(cam), lod)
         assert steps == ref_steps
         np.testing.assert_array_equal(canonical(got)[1], canonical(ref)[1])

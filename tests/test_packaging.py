@@ -20,7 +20,7 @@ def test_wheel_installs_and_renders(tmp_path):
         "import paramlod, paramlod.kernels, paramlod.functions, paramlod.surfels\n"
         f"assert paramlod.__file__.startswith({str(site)!r}), paramlod.__file__\n"
         "assert 'lod_step' in paramlod.kernels.source('lod/lod.cl')\n"
-        "from paramlod.registry import all_functions\n"
+        "from paramlod.function.registry import all_functions\n"
         "assert {'sphere', 'torus'} <= set(all_functions())\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, env=env, cwd=tmp_path)

@@ -11,7 +11,7 @@ import sympy as sp
 
 import paramlod as pl
 from paramlod.function import registry
-from paramlod.function.define import Part
+from paramlod import Part
 
 HERE = Path(__file__).resolve().parent
 PLUGINS = HERE / "plugins"
@@ -251,7 +251,7 @@ def test_part_errors():
     expect_error(r"plugin 'holder'.*parts\[0\] \(cone\): at = \(2.0, 0.0\) lies outside", outside)
 
     def bad_params():
-        @pl.parametric(parts=[Part(pl.registry.get_function("cone"), at=(0.5, 0.5), params={"hight": 1})])
+        @pl.parametric(parts=[Part(registry.get_function("cone"), at=(0.5, 0.5), params={"hight": 1})])
         def typo(u, v):
             return u, v, 0
     expect_error(r"plugin 'typo'.*parts\[0\] \(cone\).*no parameter 'hight'", bad_params)

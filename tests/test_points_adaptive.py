@@ -8,7 +8,8 @@ import pytest
 
 import paramlod as pl
 from paramlod.core.frame import Frame
-from paramlod.renderers.points import PointSettings, count_holes, grid_counts, side_counts
+from helpers.holes import count_holes
+from paramlod.renderers.points import PointSettings, grid_counts, side_counts
 from paramlod.function.registry import get_function
 from paramlod.pipeline.driver import RenderSettings
 

@@ -8,14 +8,22 @@ from paramlod.renderers import points_reference as ref
 from paramlod.device.context import cl_device
 from paramlod.renderers.targets import KeyBuffer
 from paramlod.lod.stage import LodSettings, LodStage
-from paramlod.renderers.points import DirectPointRenderer, PointSettings, count_holes, grid_counts
-from paramlod.renderers.points_lfb import LocalFramebufferRenderer, SsaaSettings, render_points_ssaa
-from paramlod.pipeline.driver import LIGHT, camera_record
+from helpers.holes import count_holes
+from paramlod.renderers.points import DirectPointRenderer, PointSettings, grid_counts
+from paramlod.renderers.points_lfb import LocalFramebufferRenderer, SsaaSettings
+from paramlod.core.layouts import camera_record
+from paramlod.renderers.shading import LIGHT
 
 from conftest import sphere_disc
 from test_points_adaptive import DISTANCES, SHAPES, camera_at, dense_silhouette, shape_scene
 
 CLEAR = np.iinfo(np.uint64).max
+
+
+def render_points_ssaa(scene, camera, settings=None, lod=None):
+    """A frame of the local-framebuffer variant through the frame driver."""
+    rs = pl.RenderSettings(lod=lod or pl.LodSettings(), ssaa=settings or SsaaSettings())
+    return pl.render(scene, camera, variant="points-ssaa", settings=rs)
 
 
 class Setup:

@@ -5,7 +5,8 @@ import pytest
 
 import paramlod as pl
 from paramlod.renderers.points_reference import resolve_blocks
-from paramlod.pipeline.driver import RenderSettings, renderer_for
+from paramlod.pipeline.driver import scene_state
+from paramlod.pipeline.settings import RenderSettings
 
 from conftest import sphere_disc
 
@@ -23,10 +24,10 @@ def test_downsample_equals_numpy_resolve_of_the_subsample_keys(ss):
     scene.add("sphere", transform=pl.translate(0.4, 0, 0.3) @ pl.scale(0.5))
     cam = pl.Camera.look_at((0, 1, 3), (0, 0, 0), size=(80, 60))
     frame = pl.render(scene, cam, settings=_settings(ss))
-    r = renderer_for(scene)
-    color_ss, aux_ss = r.keys_ss.read_keys()
+    state = scene_state(scene)
+    color_ss, aux_ss = state.subsample_keys(cam.size, ss).read_keys()
     assert color_ss.shape == (60 * ss, 80 * ss)
-    color, aux = r.keys.read_keys()
+    color, aux = state.keys(cam.size, ss).read_keys()
     expect_c, expect_a, covered = resolve_blocks(color_ss, aux_ss, 80, 60, ss)
     np.testing.assert_array_equal(color, expect_c)
     np.testing.assert_array_equal(aux, expect_a)

@@ -9,8 +9,8 @@ import trimesh  # noqa: E402
 import scipy.spatial as spatial  # noqa: E402
 
 from paramlod.core.camera import Camera  # noqa: E402
-from paramlod.surfels import (FixedCount, FixedSize, SurfelSet, load_mesh, mesh_gbuffer,  # noqa: E402
-                              render_surfels, sample_gbuffer)
+from paramlod.surfels import FixedCount, FixedSize, SurfelSet, render_surfels  # noqa: E402
+from paramlod.surfels.build import load_mesh, mesh_gbuffer, sample_gbuffer  # noqa: E402
 from paramlod.surfels.format import nearest_neighbour_distances  # noqa: E402
 from paramlod.surfels.build.gbuffer import MeshRasterizer  # noqa: E402
 

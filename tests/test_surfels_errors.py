@@ -8,7 +8,8 @@ import pytest
 trimesh = pytest.importorskip("trimesh")
 
 from paramlod.errors import ParamlodError  # noqa: E402
-from paramlod.surfels import SurfelError, SurfelSet, load_mesh, sample_mesh  # noqa: E402
+from paramlod.surfels import SurfelError, SurfelSet  # noqa: E402
+from paramlod.surfels.build import load_mesh, sample_mesh  # noqa: E402
 from paramlod.app.surfels_cmd import main  # noqa: E402
 
 PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"

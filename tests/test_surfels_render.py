@@ -7,10 +7,12 @@ trimesh = pytest.importorskip("trimesh")
 
 import paramlod as pl  # noqa: E402
 from paramlod.renderers.targets import KeyBuffer  # noqa: E402
-from paramlod.pipeline.driver import LIGHT, camera_record  # noqa: E402
-from paramlod.surfels import (FixedCount, FixedSize, FrameTimeAdaptive, OrthoCamera, SurfelError,  # noqa: E402
-                              choose_prefix, draw_surfels, render_surfels, sample_mesh)
-from paramlod.surfels import reference as ref  # noqa: E402
+from paramlod.core.layouts import camera_record
+from paramlod.renderers.shading import LIGHT  # noqa: E402
+from paramlod.surfels import (FixedCount, FixedSize, FrameTimeAdaptive, SurfelError, choose_prefix,  # noqa: E402
+                              draw_surfels, render_surfels)
+from paramlod.surfels.build import OrthoCamera, sample_mesh  # noqa: E402
+from paramlod.surfels.build import reference as ref  # noqa: E402
 from paramlod.surfels.render import _DeviceSurfels, draw_records, pixel_world_size  # noqa: E402
 from paramlod.core.transforms import rotate, scale, translate  # noqa: E402
 

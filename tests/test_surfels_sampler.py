@@ -6,11 +6,12 @@ import pytest
 import trimesh  # noqa: E402
 
 import paramlod as pl  # noqa: E402
-from paramlod.surfels import (Sampler, SurfelSet, mesh_gbuffer, sample_gbuffer, sample_mesh,  # noqa: E402
-                              sample_scene, soup_from_trimesh)
-from paramlod.surfels import reference as ref  # noqa: E402
-from paramlod.surfels.build.sampler import (level_strides, remap_keys, run_levels, splat_r2,  # noqa: E402
-                                      threshold_r2)
+from paramlod.surfels import SurfelSet  # noqa: E402
+from paramlod.surfels.build import (Sampler, mesh_gbuffer, sample_gbuffer, sample_mesh, sample_scene,  # noqa: E402
+                                    soup_from_trimesh)
+from paramlod.surfels.build import reference as ref  # noqa: E402
+from paramlod.surfels.build.sampler import run_levels  # noqa: E402
+from paramlod.surfels.build.schedule import level_strides, remap_keys, splat_r2, threshold_r2  # noqa: E402
 
 
 def two_parts():

@@ -11,14 +11,20 @@ import sympy as sp
 from conftest import iou, sphere_disc
 
 import paramlod as pl
-from paramlod.pipeline.composite import composite, render_mixed, split_by_variant
+from paramlod.pipeline.composite import composite
 from paramlod.errors import FunctionError, SceneError
 from paramlod.core.frame import Frame
 from paramlod.lod.stage import LodSettings
 from paramlod.lod.patches import RENDER_DTYPE
+from paramlod.function.probes import glsl_surface
 from paramlod.function.registry import all_functions, get_function
-from paramlod.renderers.tess import (AAMode, TessRenderer, TessSettings, glsl_surface, lod_divisor, parse_aa,
-                           render_tess)
+from paramlod.renderers.tess import AAMode, TessRenderer, TessSettings, lod_divisor, parse_aa
+
+
+def render_tess(scene, camera, settings=None, lod_settings=None):
+    """A frame of the tess variant through the frame driver."""
+    rs = pl.RenderSettings(tess=settings or TessSettings(), lod=lod_settings or LodSettings())
+    return pl.render(scene, camera, variant="tess", settings=rs)
 
 
 def erode(mask, r=1):
@@ -351,10 +357,8 @@ def test_render_list_transfer_is_reported():
     for k in ("render_list_read", "render_list_upload", "render_list", "lod", "draw", "resolve", "total"):
         assert k in ms and ms[k] >= 0
     assert f.stats["render_list_bytes"] == 64 * f.stats["render_patches"]
-    # the same frame through another LOD stage (as paramlod.render's Renderer would pass its own)
-    from paramlod.pipeline.driver import renderer_for
-
-    g = render_tess(scene, cam, lod_stage=renderer_for(scene).lod)
+    # the same frame again, from the state the driver kept (LOD buffers, GL targets)
+    g = render_tess(scene, cam)
     assert np.array_equal(g.depth, f.depth) and np.array_equal(g.color, f.color)
 
 
@@ -399,14 +403,18 @@ def test_composite_by_depth_over_and_order():
 
 def test_mixed_scene_composites_by_depth():
     """A sphere drawn by points and a torus in front of it drawn by tessellation."""
-    scene = pl.Scene()
-    scene.add("sphere", material=pl.Material(color=(0.8, 0.2, 0.2)))
-    scene.add("torus", transform=pl.translate(0.5, 0.0, 1.3), material=pl.Material(color=(0.2, 0.8, 0.2)))
+    def build(variants):
+        scene = pl.Scene()
+        scene.add("sphere", material=pl.Material(color=(0.8, 0.2, 0.2)), variant=variants[0])
+        scene.add("torus", transform=pl.translate(0.5, 0.0, 1.3), material=pl.Material(color=(0.2, 0.8, 0.2)),
+                  variant=variants[1])
+        return scene
+
+    scene = build(["points", "tess"])
     cam = pl.Camera.look_at((0, 0, 5), (0, 0, 0), size=(96, 96))
-    mixed = render_mixed(scene, cam, ["points", "tess"])
-    subs = split_by_variant(scene, ["points", "tess"])
-    fp = pl.render(subs["points"], cam)
-    ft = render_tess(subs["tess"], cam)
+    mixed = pl.render(scene, cam)
+    fp = pl.render(scene.subscene(scene.objects[:1]), cam)
+    ft = render_tess(scene.subscene(scene.objects[1:]), cam)
     assert set(np.unique(fp.object_id)) == {0, 1} and set(np.unique(ft.object_id)) == {0, 2}
     # not bit-equal on a GPU: there the render list's order changes from run to run, and where
     # two patches tie in the depth buffer the first one drawn writes the linear depth
@@ -420,6 +428,6 @@ def test_mixed_scene_composites_by_depth():
     opaque = nearer_t & (ft.color[..., 3] == 1)
     assert np.allclose(mixed.color[opaque], ft.color[opaque], atol=1e-6)
     # the same scene drawn by one variant labels nearly every pixel the same way
-    full = pl.render(scene, cam)
+    full = pl.render(build([None, None]), cam)
     assert (mixed.object_id == full.object_id).mean() >= 0.97
-    assert mixed.stats["variant"] == "composite" and len(mixed.stats["parts"]) == 2
+    assert mixed.stats["variant"] == "composite" and len(mixed.stats["passes"]) == 2

@@ -4,7 +4,7 @@
 // variants share and the direct variant; points_lfb.cl (local framebuffers) builds on it.
 
 // Sample counts: factor = density * oversample / (1 - epsilon) samples per measured pixel
-// (paramlod/points.py, PointSettings.factor; the numpy twin is paramlod.points.side_counts).
+// (paramlod/renderers/sampling.py, PointSettings.factor; the numpy twin is paramlod.renderers.sampling.side_counts).
 // Rounding up and adding one gives at least `factor` steps per pixel; never fewer than 2.
 inline uint side_count(float m, float factor, uint max_side) {
     float n = ceil(m * factor) + 1.0f;

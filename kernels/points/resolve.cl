@@ -1,31 +1,67 @@
-// Resolve: decode the shared colour and aux key buffers (keys.cl) into the Frame's arrays.
-__kernel void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uint n,
-                      __global float4* color, __global float* depth, __global float4* normal,
-                      __global uint* object_id)
-{
-    uint i = get_global_id(0);
-    if (i >= n) return;
-    ulong k = color_buf[i];
-    if (k == 0xFFFFFFFFFFFFFFFFul) {
-        color[i] = (float4)(0.0f); depth[i] = INFINITY; normal[i] = (float4)(0.0f); object_id[i] = 0u;
-        return;
-    }
-    uint rgba = (uint)k;
-    float4 s = (float4)((rgba >> 24) & 255u, (rgba >> 16) & 255u, (rgba >> 8) & 255u, rgba & 255u) / 255.0f;
-    float3 lin = select(pow((s.xyz + 0.055f) / 1.055f, (float3)(2.4f)), s.xyz / 12.92f,
-                        isless(s.xyz, (float3)(0.04045f)));
-    color[i] = (float4)(lin, s.w);
-    depth[i] = as_float((uint)(k >> 32));
-    ulong a = aux_buf[i];
-    uint oct = (uint)(a >> 12) & 0xFFFFFu;
-    float2 p = (float2)((float)(oct >> 10) - 511.5f, (float)(oct & 1023u) - 511.5f) / 511.5f;
-    float3 nn = (float3)(p.x, p.y, 1.0f - fabs(p.x) - fabs(p.y));
-    if (nn.z < 0.0f) {
-        float2 q = (float2)((1.0f - fabs(p.y)) * (p.x >= 0.0f ? 1.0f : -1.0f),
-                            (1.0f - fabs(p.x)) * (p.y >= 0.0f ? 1.0f : -1.0f));
-        nn.x = q.x; nn.y = q.y;
-    }
-    normal[i] = (float4)(normalize(nn), 0.0f);
-    object_id[i] = (uint)a & 0xFFFu;
-}
+// Resolve: decode the shared colour and aux key buffers (common/keys.cl) into the Frame's arrays,
+// the 8-bit sRGB image over the background (what a PNG holds: the only array read back when only
+// an image is asked for), and the frame's counters. Built after keys.cl and subsamples.cl (for
+// encode_srgb8 and the lin/thr tables). Driven by paramlod.renderers.targets.KeyBuffer; numpy
+// twin of the image and counters: paramlod.renderers.points_reference.resolve_image.
+//
+// counts[0]: pixels written (any sample); counts[1]: covered subsamples, rint(alpha * PL_SS_COUNT)
+// summed (alpha = coverage of a supersampled frame; PL_SS_COUNT = 1 otherwise).
 
+#ifndef PL_SS_COUNT
+#define PL_SS_COUNT 1
+#endif
+#define RESOLVE_LOCAL 256
+
+__kernel __attribute__((reqd_work_group_size(RESOLVE_LOCAL, 1, 1)))
+void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uint n,
+             __global float4* color, __global float* depth, __global float4* normal,
+             __global uint* object_id, __global uchar4* image, uint background,
+             __global const uint* lin, __global const uint* thr, __global uint* counts)
+{
+    __local uint written, covered;
+    if (get_local_id(0) == 0) { written = 0u; covered = 0u; }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    uint i = get_global_id(0);
+    if (i < n) {
+        ulong k = color_buf[i];
+        if (k == 0xFFFFFFFFFFFFFFFFul) {
+            color[i] = (float4)(0.0f); depth[i] = INFINITY; normal[i] = (float4)(0.0f); object_id[i] = 0u;
+            image[i] = (uchar4)(background >> 24, (background >> 16) & 255u, (background >> 8) & 255u, 255u);
+        } else {
+            uint rgba = (uint)k;
+            float4 s = (float4)((rgba >> 24) & 255u, (rgba >> 16) & 255u, (rgba >> 8) & 255u, rgba & 255u) / 255.0f;
+            float3 lin3 = select(pow((s.xyz + 0.055f) / 1.055f, (float3)(2.4f)), s.xyz / 12.92f,
+                                 isless(s.xyz, (float3)(0.04045f)));
+            color[i] = (float4)(lin3, s.w);
+            depth[i] = as_float((uint)(k >> 32));
+            ulong a = aux_buf[i];
+            uint oct = (uint)(a >> 12) & 0xFFFFFu;
+            float2 p = (float2)((float)(oct >> 10) - 511.5f, (float)(oct & 1023u) - 511.5f) / 511.5f;
+            float3 nn = (float3)(p.x, p.y, 1.0f - fabs(p.x) - fabs(p.y));
+            if (nn.z < 0.0f) {
+                float2 q = (float2)((1.0f - fabs(p.y)) * (p.x >= 0.0f ? 1.0f : -1.0f),
+                                    (1.0f - fabs(p.x)) * (p.y >= 0.0f ? 1.0f : -1.0f));
+                nn.x = q.x; nn.y = q.y;
+            }
+            normal[i] = (float4)(normalize(nn), 0.0f);
+            object_id[i] = (uint)a & 0xFFFu;
+            // over the background in linear fixed point (integer only: the twin matches exactly)
+            uint al = rgba & 255u;
+            uint out[3];
+            for (uint c = 0; c < 3; ++c) {
+                uint code = (rgba >> (24 - 8 * c)) & 255u;
+                uint bg = (background >> (24 - 8 * c)) & 255u;
+                out[c] = al == 255u ? code
+                    : encode_srgb8((uint)(((ulong)lin[code] * al + (ulong)lin[bg] * (255u - al) + 127u) / 255u), thr);
+            }
+            image[i] = (uchar4)(out[0], out[1], out[2], 255u);
+            atomic_inc(&written);
+            atomic_add(&covered, convert_uint(rint(s.w * (float)PL_SS_COUNT)));
+        }
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (get_local_id(0) == 0) {
+        if (written) atomic_add(&counts[0], written);
+        if (covered) atomic_add(&counts[1], covered);
+    }
+}

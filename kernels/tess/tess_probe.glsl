@@ -1,6 +1,6 @@
 // Probe (tests and debugging): evaluates pl_surface at given (u, v) for one function and parameter
 // offset in a vertex shader; the results come back through transform feedback
-// (paramlod.tess.glsl_surface), to compare the generated GLSL with the numpy reference.
+// (paramlod.function.probes.glsl_surface), to compare the generated GLSL with the numpy reference.
 in vec2 in_uv;
 uniform uint u_func;
 uniform uint u_param_offset;

@@ -8,14 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
+from paramlod.app.args import add_size
+from paramlod.app.scenefile import load_scene
+from paramlod.core.files import write_atomically
+from paramlod.device.context import cl_device
 from paramlod.errors import ParamlodError
-from paramlod.core.frame import write_atomically
+from paramlod.pipeline.driver import render
 
 
 def add_arguments(p):
     p.add_argument("--scenes", default="gallery", help="folder of .toml scenes (default gallery)")
     p.add_argument("--out", default="gallery/images", help="output folder (default gallery/images)")
-    p.add_argument("--size", help="override every scene's size, e.g. 96x96")
+    add_size(p, what="override every scene's size")
     p.add_argument("--only", nargs="+", metavar="NAME", help="render only these scenes (file stems)")
 
 
@@ -30,10 +34,6 @@ def _aa(sf, variant: str, stats: dict) -> str:
 
 def render_scene_file(path, size=None):
     """(SceneFile, frames, variant label) for one scene file; several frames if animated."""
-    from paramlod.pipeline.composite import render_mixed
-    from paramlod.pipeline.driver import render
-    from paramlod.app.scenefile import load_scene
-
     sf = load_scene(path, size=size)
     camera = sf.camera
     times = [sf.scene.time]
@@ -43,10 +43,7 @@ def render_scene_file(path, size=None):
     frames = []
     for t in times:
         sf.scene.time = float(t)
-        if sf.object_variants:
-            frames.append(render_mixed(sf.scene, camera, sf.object_variants, sf.settings, sf.settings.tess))
-        else:
-            frames.append(render(sf.scene, camera, variant=sf.variant, settings=sf.settings))
+        frames.append(render(sf.scene, camera, variant=sf.variant, settings=sf.settings))
     variant = "mixed (" + ", ".join(sorted(set(sf.object_variants))) + ")" if sf.object_variants else sf.variant
     return sf, frames, variant
 
@@ -54,9 +51,7 @@ def render_scene_file(path, size=None):
 def caption(sf, frame, variant: str, device: str, elapsed_ms: float) -> dict:
     s = frame.stats
     ms = s.get("ms", {})
-    patches = s.get("render_patches")
-    if patches is None and "parts" in s:
-        patches = sum(p.get("render_patches", 0) for p in s["parts"])
+    patches = s["render_patches"]
     return {
         "title": sf.meta.get("title", sf.path.stem),
         "caption": sf.meta.get("caption", ""),
@@ -94,9 +89,6 @@ def markdown(captions: list[dict]) -> str:
 def run_gallery(args) -> int:
     from tqdm import tqdm
 
-    from paramlod.app.cli import _size
-    from paramlod.device.context import cl_device
-
     folder = Path(args.scenes)
     files = sorted(folder.glob("*.toml"))
     if args.only:
@@ -110,7 +102,7 @@ def run_gallery(args) -> int:
         raise ParamlodError(f"no .toml scenes in {folder}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    size = _size(args.size) if args.size else None
+    size = args.size
     captions = []
     bar = tqdm(files, unit="scene")
     for f in bar:

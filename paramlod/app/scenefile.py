@@ -2,6 +2,7 @@
 field and its line. Format: docs/scene-format.md."""
 from __future__ import annotations
 
+import importlib
 import re
 import tomllib
 from dataclasses import dataclass
@@ -9,13 +10,19 @@ from pathlib import Path
 
 import numpy as np
 
+from paramlod import dmri
+from paramlod.app.args import MAX_SIDE
 from paramlod.core.camera import Camera
+from paramlod.core.transforms import matrix as as_matrix, rotate, scale, translate
 from paramlod.errors import ParamlodError, SceneError
 from paramlod.lod.stage import LodSettings
+from paramlod.pipeline.settings import RenderSettings
+from paramlod.renderers.registry import variants
 from paramlod.renderers.points import PointSettings
-from paramlod.pipeline.driver import VARIANTS, RenderSettings
+from paramlod.renderers.tess import TessSettings
+from paramlod.scene.framing import framing_camera
 from paramlod.scene.scene import Material, Scene
-from paramlod.core.transforms import matrix as as_matrix, rotate, scale, translate
+from paramlod.surfels.render import FixedCount, FixedSize
 
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation"}
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
@@ -121,12 +128,13 @@ def load_scene(path, size=None) -> SceneFile:
         ck.fail("camera", "must be a table [camera]", "camera")
     ck.unknown(cam_d, CAMERA_KEYS, "camera", "camera")
     size = list(size) if size is not None else cam_d.get("size", [960, 540])
-    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(x, int) and 0 < x <= 16384 for x in size)):
+    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(x, int) and 0 < x <= MAX_SIDE for x in size)):
         ck.fail("camera.size", f"must be [width, height] in pixels, got {size!r}", "camera", None, "size")
     r = data.get("render", {})
     if not isinstance(r, dict):
         ck.fail("render", "must be a table [render]", "render")
     ck.unknown(r, RENDER_KEYS, "render", "render")
+    VARIANTS = variants("parametric")
     variant = r.get("variant", "points")
     if variant not in VARIANTS:
         ck.fail("render.variant", f"unknown variant {variant!r} (available: {', '.join(VARIANTS)})", "render", None, "variant")
@@ -175,6 +183,10 @@ def load_scene(path, size=None) -> SceneFile:
                 _add_instances(scene, o, params, path, m, mat, ck, where, i)
             else:
                 scene.add(o["function"], params=params, transform=m, material=mat)
+            if ov is not None and "surfels" not in o:   # the object's own renderer and AA mode
+                obj = scene.objects[-1]
+                obj.variant, _, aa = ov.partition(":")
+                obj.aa = aa or None
         except SceneError as exc:
             if str(exc).startswith(str(path)):
                 raise
@@ -210,8 +222,6 @@ def _camera(cam_d: dict, size, scene, ck: _Checker) -> Camera:
     up = ck.vec(cam_d, "up", 3, "camera", "camera", default=[0.0, 1.0, 0.0])
     try:
         if "eye" not in cam_d:
-            from paramlod.scene.framing import framing_camera
-
             if "target" in cam_d or "near" in cam_d or "far" in cam_d:
                 ck.fail("camera", "target, near and far need an eye; without eye the camera frames the scene",
                         "camera")
@@ -233,8 +243,6 @@ def _camera(cam_d: dict, size, scene, ck: _Checker) -> Camera:
 
 def _import(spec: str):
     """``"package.module:function"`` -> the function."""
-    import importlib
-
     mod, _, name = spec.partition(":")
     if not mod or not name:
         raise SceneError(f"a builder is named 'package.module:function', got {spec!r}")
@@ -261,8 +269,6 @@ def _add_instances(scene, o, params, path, m, mat, ck, where, i):
 
 def _add_surfels(scene, spec, path, m, mat, ck, where, i):
     """``surfels = { path = "x.surfels", px = 2 }`` (surfel size in pixels) or ``count = N``."""
-    from paramlod.surfels import FixedCount, FixedSize
-
     if not isinstance(spec, dict) or "path" not in spec or set(spec) - {"path", "px", "count"} \
             or ("px" in spec and "count" in spec):
         ck.fail(f"{where}.surfels", 'must be { path = "x.surfels", px = 2 } or { path = ..., count = N }',
@@ -275,8 +281,6 @@ def _add_surfels(scene, spec, path, m, mat, ck, where, i):
 def _add_sh_field(scene, spec, path, m, mat, ck, where, i):
     """``sh_field = { path = "x.npz" | "x.nii.gz", basis = ..., color_by = ..., ... }``: a glyph
     field from a file (paramlod.dmri), as one object of 'sh_glyph' instances."""
-    from paramlod import dmri
-
     if not isinstance(spec, dict) or "path" not in spec:
         ck.fail(f"{where}.sh_field", 'must be { path = "field.npz" or "sh.nii.gz", ... }', "objects", i, "sh_field")
     spec = dict(spec)
@@ -294,8 +298,6 @@ def _add_sh_field(scene, spec, path, m, mat, ck, where, i):
 
 
 def _tess_settings(r: dict, ck: _Checker):
-    from paramlod.renderers.tess import TessSettings
-
     ts = TessSettings()
     if "aa" in r:
         ts.aa = r["aa"]

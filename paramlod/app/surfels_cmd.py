@@ -1,4 +1,4 @@
-"""``paramlod surfels sample | render | info`` (paramlod/cli.py calls add_subparser)."""
+"""``paramlod surfels sample | render | info`` (paramlod/app/cli.py calls add_subparser)."""
 from __future__ import annotations
 
 import argparse
@@ -8,29 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from paramlod.errors import ParamlodError
-
+from paramlod.app.args import add_output, add_size, add_stats, parse_vec3, run_reporting_errors
+from paramlod.core.camera import Camera
 from paramlod.errors import SurfelError
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-        if not (0 < w <= 16384 and 0 < h <= 16384):
-            raise ValueError
-        return w, h
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must look like 512x512, got {text!r}") from None
-
-
-def _vec3(text: str) -> tuple[float, float, float]:
-    try:
-        v = tuple(float(x) for x in text.split(","))
-        if len(v) != 3 or not all(np.isfinite(v)):
-            raise ValueError
-        return v
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected three numbers like 1,0.5,2, got {text!r}") from None
+from paramlod.surfels.build.sampler import sample
+from paramlod.surfels.format import SurfelSet
+from paramlod.surfels.render import FixedCount, FixedSize, default_camera, render_surfels
 
 
 def _check_output_folder(path: Path):
@@ -40,8 +23,6 @@ def _check_output_folder(path: Path):
 
 
 def cmd_sample(args) -> int:
-    from paramlod.surfels.build.sampler import sample
-
     out = Path(args.output)
     _check_output_folder(out)  # fail before the sampling, not after it
     s = sample(args.source, args.count, views=args.views, resolution=args.resolution, seed=args.seed,
@@ -58,10 +39,6 @@ def cmd_sample(args) -> int:
 
 
 def _camera(args, surfels):
-    from paramlod.core.camera import Camera
-
-    from paramlod.surfels.render import default_camera
-
     if args.eye is None:
         cam = default_camera(surfels, args.size, fov_y=args.fov)
         if args.target is None and args.up is None:
@@ -78,9 +55,6 @@ def _camera(args, surfels):
 
 
 def cmd_render(args) -> int:
-    from paramlod.surfels.format import SurfelSet
-    from paramlod.surfels.render import FixedCount, FixedSize, render_surfels
-
     s = SurfelSet.load(args.surfels)
     strategy = FixedCount(args.count) if args.count is not None else FixedSize(args.px if args.px is not None else 2.0)
     frame = render_surfels(s, _camera(args, s), strategy)
@@ -98,8 +72,6 @@ def cmd_render(args) -> int:
 
 
 def cmd_info(args) -> int:
-    from paramlod.surfels.format import SurfelSet
-
     path = Path(args.surfels)
     s = SurfelSet.load(path)
     lo, hi = s.bounds
@@ -145,13 +117,13 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
     g = r.add_mutually_exclusive_group()
     g.add_argument("--px", type=float, help="surfel size in pixels at the object's distance (default 2)")
     g.add_argument("--count", type=int, help="draw this many surfels instead")
-    r.add_argument("--size", type=_size, default=(512, 512), help="image size, e.g. 800x600 (default 512x512)")
-    r.add_argument("-o", "--output", action="append", required=True, help="output .png or .exr (repeatable)")
-    r.add_argument("--eye", type=_vec3, help="camera position x,y,z (default: a 3/4 view framing the set)")
-    r.add_argument("--target", type=_vec3, help="camera target x,y,z (default: the set's centre)")
-    r.add_argument("--up", type=_vec3, help="camera up vector (default 0,1,0)")
+    add_size(r, "512x512")
+    add_output(r)
+    r.add_argument("--eye", type=parse_vec3, help="camera position x,y,z (default: a 3/4 view framing the set)")
+    r.add_argument("--target", type=parse_vec3, help="camera target x,y,z (default: the set's centre)")
+    r.add_argument("--up", type=parse_vec3, help="camera up vector (default 0,1,0)")
     r.add_argument("--fov", type=float, default=35.0, help="vertical field of view in degrees (default 35)")
-    r.add_argument("--stats", help="write the frame statistics as JSON to this file")
+    add_stats(r)
     r.set_defaults(func=cmd_render)
 
     i = sub.add_parser("info", help="print what a .surfels file holds")
@@ -162,16 +134,12 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    """Stand-alone entry (``python -m paramlod.surfels.cli ...``): the same commands without the
+    """Stand-alone entry (``python -m paramlod.app.surfels_cmd ...``): the same commands without the
     ``paramlod surfels`` prefix's global options."""
     parser = argparse.ArgumentParser(prog="paramlod")
     add_subparser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except ParamlodError as exc:
-        print(f"paramlod: error: {exc}", file=sys.stderr)
-        return 2
+    return run_reporting_errors(lambda: args.func(args))
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from paramlod.errors import DeviceError
 
@@ -22,6 +22,8 @@ class CLDevice:
     context: object
     queue: object
     device: object
+    # objects that live as long as the context (built programs, uploaded tables), by owner's key
+    cache: dict = field(default_factory=dict)
 
     @property
     def name(self) -> str:
@@ -37,6 +39,7 @@ class CLDevice:
 _cl: CLDevice | None = None
 _cl_override: str | None = None
 _gl = None
+_gl_cache: dict = {}   # objects that live as long as the GL context (compiled shader programs)
 
 
 def _list_devices():
@@ -123,6 +126,13 @@ def gl_context():
                 "Install Mesa's EGL (Debian: libegl1 libegl-mesa0) or an NVIDIA driver.") from exc
         _gl = ctx
     return _gl
+
+
+def gl_cache(ctx) -> dict:
+    """The cache of objects that live as long as GL context ``ctx`` (this module's context)."""
+    if ctx is not _gl:
+        raise DeviceError("gl_cache: not the context of paramlod.device.context.gl_context()")
+    return _gl_cache
 
 
 def cl_info() -> dict:

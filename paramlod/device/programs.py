@@ -11,7 +11,6 @@ from paramlod import kernels
 from paramlod.device.context import cl_device
 from paramlod.errors import FunctionError
 
-_cache: dict[tuple, object] = {}
 
 
 CL_LINE = r":(\d+):\d+:"              # clang-style 'file:LINE:COL:'
@@ -42,8 +41,9 @@ def build(files: list[str], defines: dict | None = None, options: tuple = (), ge
     src = "\n".join([kernels.source("common/common.cl"), generated, *(kernels.source(f) for f in files)])
     opts = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items())) + tuple(options)
     dev = cl_device()
-    key = (src, opts, id(dev.context))
-    prog = _cache.get(key)
+    cache = dev.cache.setdefault("programs", {})
+    key = (src, opts)
+    prog = cache.get(key)
     if prog is None:
         try:
             prog = cl.Program(dev.context, src).build(options=list(opts))
@@ -52,11 +52,10 @@ def build(files: list[str], defines: dict | None = None, options: tuple = (), ge
             raise FunctionError(
                 f"the generated OpenCL code does not compile (functions: {describe}).\n"
                 f"{context_lines(src, log)}\ncompiler said:\n{log[-2000:]}") from None
-        _cache[key] = prog
+        cache[key] = prog
     return prog
 
 
-_kernels: dict[tuple, object] = {}
 _timing: list | None = None   # kernel events of the current measurement, when one is running
 
 
@@ -106,8 +105,9 @@ def kernel(name: str, files: list[str], defines: dict | None = None, options: tu
            describe: str = "none"):
     """A kernel object from ``build(files, defines, options, generated)``, retrieved once and reused."""
     prog = build(files, defines, options, generated, describe)
-    key = (id(prog), name)
-    k = _kernels.get(key)
+    kernels_ = cl_device().cache.setdefault("kernels", {})
+    key = (prog, name)
+    k = kernels_.get(key)
     if k is None:
-        k = _kernels[key] = TimedKernel(cl.Kernel(prog, name))
+        k = kernels_[key] = TimedKernel(cl.Kernel(prog, name))
     return k

@@ -1,5 +1,5 @@
 """Code generation: sympy expressions -> OpenCL C (single precision, with common-subexpression
-elimination). The numpy side is sympy.lambdify (see ``function.py``).
+elimination). The numpy side is sympy.lambdify (see ``define.py``).
 
 For each function index i the generated source defines
 
@@ -23,6 +23,7 @@ import sympy as sp
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
+from paramlod import kernels
 from paramlod.errors import FunctionError
 from paramlod.function.define import ParametricFunction
 
@@ -251,8 +252,6 @@ def cl_dispatch_source(functions: list[ParametricFunction]) -> str:
     """All functions of a scene plus the dispatchers the kernels call."""
     parts = []
     if any(f.is_snippet for f in functions):
-        from paramlod import kernels
-
         parts.append(kernels.source("common/dialect.cl"))
     parts += [cl_function_source(f, i) for i, f in enumerate(functions)]
     cases_p = "".join(f"        case {i}: return pl_pos_{i}(u, v, P);\n" for i in range(len(functions)))

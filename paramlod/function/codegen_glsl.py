@@ -1,6 +1,6 @@
 """Code generation: sympy expressions (or dialect snippets) -> GLSL 4.50 for the tessellation renderer.
 
-The GLSL twin of ``codegen.py``, built on the same pieces (``CLPrinter`` retargeted through its
+The GLSL twin of ``codegen_cl.py``, built on the same pieces (``CLPrinter`` retargeted through its
 ``names`` table, ``function_body`` with the same common-subexpression elimination, the snippet
 dialect of ``kernels/dialect.glsl``). For each function index i it defines
 
@@ -21,8 +21,9 @@ import math
 from sympy.printing.c import known_functions_C99
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
-from paramlod.function.codegen_cl import CLPrinter, function_body, param_lines, snippet_body
+from paramlod import kernels
 from paramlod.errors import FunctionError
+from paramlod.function.codegen_cl import CLPrinter, function_body, param_lines, snippet_body
 from paramlod.function.define import ParametricFunction
 
 # sympy function name -> GLSL 4.50 built-in (float in, float out)
@@ -139,8 +140,6 @@ def glsl_dispatch_source(functions, position: bool = True, surface: bool = True)
     functions = list(functions)
     parts = []
     if any(f.is_snippet for f in functions):
-        from paramlod import kernels
-
         parts.append("#define PARAM(k) pl_params[P + uint(k)]\n" + kernels.source("common/dialect.glsl"))
     try:
         parts += [glsl_function_source(f, i, position, surface) for i, f in enumerate(functions)]

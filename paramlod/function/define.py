@@ -1,6 +1,6 @@
 """Parametric functions f(u, v) -> R^3 defined with sympy, and their numpy evaluation.
 
-A function is written once as sympy expressions; code generation (``codegen``) turns the same
+A function is written once as sympy expressions; code generation (``codegen_cl``) turns the same
 expressions into OpenCL C for the kernels and into numpy for the references, and the analytic
 partial derivatives give the normals.
 
@@ -36,6 +36,7 @@ import numpy as np
 import sympy as sp
 
 from paramlod.errors import FunctionError
+from paramlod.function.bindings import collect_bindings
 
 TIME = "t"            # the implicit time parameter's name
 MAX_PART_DEPTH = 8    # parts of parts of ... (guards against a part that contains its parent)
@@ -407,25 +408,38 @@ class ParametricFunction:
         return out
 
 
+# --- functions by name -------------------------------------------------------------------------
+# A Part (and ``evaluate``) may name a function instead of holding it. The names belong to the
+# registry (``paramlod.function.registry``), which sits above this module: ``paramlod.function``
+# (the package) installs the registry's lookup here, so this module never imports the registry.
+_name_lookup: Callable[[object], "ParametricFunction"] | None = None
+
+
+def set_name_lookup(lookup: Callable[[object], "ParametricFunction"] | None) -> None:
+    """Install the function that finds a registered function by name (``registry.get_function``)."""
+    global _name_lookup
+    _name_lookup = lookup
+
+
+def lookup(fn_or_name) -> "ParametricFunction":
+    """``fn_or_name`` itself if it is a ParametricFunction, else the registered function of that name."""
+    if isinstance(fn_or_name, ParametricFunction):
+        return fn_or_name
+    if _name_lookup is None:
+        raise FunctionError(f"cannot look up the function {fn_or_name!r}: no function registry is installed "
+                            f"(import paramlod.function)")
+    return _name_lookup(fn_or_name)
+
+
 # --- helpers for definition time ---------------------------------------------------------------
-_binding_stack: list[list[tuple[sp.Symbol, sp.Expr]]] = []  # one list per body being built
-
-
-def current_bindings() -> list | None:
-    """The binding list of the @parametric body being built (None outside a body); see dsl.let."""
-    return _binding_stack[-1] if _binding_stack else None
-
-
-class suspend_bindings:
-    """Context manager: ``let`` returns plain expressions inside (for expressions that are rewritten
-    afterwards, e.g. a curve evaluated at a dummy parameter and then differentiated)."""
-
-    def __enter__(self):
-        _binding_stack.append(None)
-
-    def __exit__(self, *exc):
-        _binding_stack.pop()
-
+# The helpers of ``paramlod.dsl`` (its ``__all__`` is this list), named in the hints of
+# ``_body_error``; kept here because dsl sits above this module and may not be imported from it.
+DSL_HELPERS = (
+    "let", "where", "step", "clamp", "saturate", "smoothstep", "mix", "fract", "mod",
+    "vec3", "dot", "cross", "length", "normalize", "rotate",
+    "bezier", "bezier_derivative", "frenet_frame", "tube",
+    "hash01", "noise", "fbm",
+)
 
 _STEP_FUNCTIONS = (sp.floor, sp.ceiling, sp.sign, sp.Heaviside)
 
@@ -459,10 +473,8 @@ def _diff(e: sp.Expr, sym: sp.Symbol, fn: ParametricFunction) -> sp.Expr:
 def _resolve(function, parent: ParametricFunction, here: str) -> ParametricFunction:
     if isinstance(function, ParametricFunction):
         return function
-    from paramlod.function.registry import get_function
-
     try:
-        return get_function(function)
+        return lookup(function)
     except FunctionError as exc:
         raise FunctionError(f"plugin '{parent.name}' ({parent.where}): part {here}: {exc}") from None
 
@@ -509,14 +521,12 @@ def _body_error(fname: str, where: str, src: str, exc: Exception) -> FunctionErr
         return exc
     if isinstance(exc, NameError):
         name = getattr(exc, "name", None) or (re.findall(r"'(\w+)'", str(exc)) or ["?"])[0]
-        from paramlod import dsl
-
-        if name in dsl.__all__:
+        if name in DSL_HELPERS:
             hint = f"; import it: from paramlod.dsl import {name}"
         elif name in dir(sp) and not name.startswith("_"):
             hint = f"; import it: from sympy import {name}"
         else:
-            helpers = list(dsl.__all__) + ["sin", "cos", "tan", "exp", "log", "sqrt", "pi", "atan2", "Abs", "floor"]
+            helpers = list(DSL_HELPERS) + ["sin", "cos", "tan", "exp", "log", "sqrt", "pi", "atan2", "Abs", "floor"]
             close = difflib.get_close_matches(name, helpers, n=3)
             hint = (f"; did you mean {', '.join(close)}?" if close else
                     "; helpers such as where, clamp, bezier, tube and noise are in paramlod.dsl, math in sympy")
@@ -700,13 +710,11 @@ def parametric(u: Sequence[float] = (0.0, 1.0), v: Sequence[float] = (0.0, 1.0),
             _check_reference(out, where)
             return out
 
-        _binding_stack.append([])
-        try:
-            result = fn(usym, vsym, **kwargs)
-        except Exception as exc:  # the user's body failed while building expressions
-            raise _body_error(fname, where, src, exc) from None
-        finally:
-            raw_bindings = _binding_stack.pop()
+        with collect_bindings() as raw_bindings:   # dsl.let appends to it while the body runs
+            try:
+                result = fn(usym, vsym, **kwargs)
+            except Exception as exc:  # the user's body failed while building expressions
+                raise _body_error(fname, where, src, exc) from None
         allowed = {usym, vsym, *flat}
         bindings = []
         for sym, e in raw_bindings:
@@ -778,7 +786,5 @@ def _check_reference(fn: ParametricFunction, where: str) -> None:
 
 def evaluate(fn_or_name, u, v, **params) -> np.ndarray:
     """Evaluate a parametric function (object or registered name) with numpy: shape (..., 3)."""
-    from paramlod.function.registry import get_function
-
-    fn = get_function(fn_or_name)
+    fn = lookup(fn_or_name)
     return fn.evaluate(u, v, **params)

@@ -2,7 +2,7 @@
 
 Sources (the registry in ``registry.py`` merges them and rejects duplicate names):
 
-* a folder of ``.py`` files (``paramlod.registry.add_plugin_path(dir)``, ``--functions DIR``,
+* a folder of ``.py`` files (``paramlod.function.registry.add_plugin_path(dir)``, ``--functions DIR``,
   ``PARAMLOD_FUNCTIONS_PATH``): every public ``@parametric`` function a file defines;
 * the entry-point group ``paramlod.functions`` of installed distributions: an entry point names a
   module (all its public functions), a ParametricFunction, or a list of them.
@@ -21,8 +21,11 @@ from types import ModuleType
 
 import numpy as np
 
+from paramlod.device.context import cl_device
 from paramlod.errors import DeviceError, FunctionError
-from paramlod.function.define import ParametricFunction
+from paramlod.function.codegen_cl import check_printable, function_body
+from paramlod.function.define import ParametricFunction, _failing_line
+from paramlod.function.programs import build, kernel
 
 ENTRY_POINT_GROUP = "paramlod.functions"
 
@@ -72,8 +75,6 @@ def load_plugin_file(path: Path, skip: set[int] = frozenset()) -> list[Parametri
         raise FunctionError(f"plugin file {path}:{exc.lineno}: syntax error: {exc.msg}") from None
     except Exception as exc:
         sys.modules.pop(modname, None)
-        from paramlod.function.define import _failing_line
-
         line = _failing_line(exc, str(path))
         at = f":{line}" if line else ""
         raise FunctionError(f"plugin file {path}{at} failed to import: {type(exc).__name__}: {exc}") from None
@@ -133,13 +134,9 @@ def load_entry_points(skip: set[int] = frozenset(), check: bool = True) -> list[
 def validate(funcs: list[ParametricFunction], compile: bool = True) -> None:
     """Load-time checks: derivatives exist, every function prints as GPU code, parts sit where the
     frame is defined, and the generated OpenCL compiles (if a device is available)."""
-    from paramlod.function.codegen_cl import check_printable
-
     for f in funcs:
         check_printable(f)
         if not f.is_snippet:
-            from paramlod.function.codegen_cl import function_body
-
             bindings, outputs = f.program("surface")  # raises now if sympy cannot differentiate
             function_body(f, outputs, bindings=bindings)  # the partials must print too
         if f.parts:
@@ -157,8 +154,6 @@ def check_compiles(fn) -> None:
     Raises FunctionError naming the plugin, its file, and the generated lines around the
     compiler's complaint.
     """
-    from paramlod.function.programs import build
-
     funcs = [fn] if isinstance(fn, ParametricFunction) else list(fn)
     try:
         build(["common/eval.cl"], funcs)
@@ -173,9 +168,6 @@ def check_compiles(fn) -> None:
     raise first
 
 
-_eval_kernels: dict[tuple, tuple] = {}
-
-
 def evaluate_cl(fn: ParametricFunction, u, v, block=None, functions=None, **params):
     """Evaluate ``fn`` on the OpenCL device at float32 (u, v): (pos, du, dv, pos_only), each (..., 3).
 
@@ -183,9 +175,6 @@ def evaluate_cl(fn: ParametricFunction, u, v, block=None, functions=None, **para
     program is built for: pass the same list for several functions to compile once.
     """
     import pyopencl.array as cla
-
-    from paramlod.device.context import cl_device
-    from paramlod.function.programs import build
 
     funcs = [fn] if functions is None else list(functions)
     index = next((i for i, f in enumerate(funcs) if f is fn), None)
@@ -199,31 +188,25 @@ def evaluate_cl(fn: ParametricFunction, u, v, block=None, functions=None, **para
     uv = np.stack([np.broadcast_to(u, shape).ravel(), np.broadcast_to(v, shape).ravel()], axis=1)
     n = uv.shape[0]
     q = cl_device().queue
-    key = (tuple(id(f) for f in funcs), id(cl_device().context))
-    if key not in _eval_kernels:
-        _eval_kernels[key] = (funcs, build(["common/eval.cl"], funcs).eval_samples)  # funcs keep the ids valid
-    kernel = _eval_kernels[key][1]
+    k = kernel("eval_samples", ["common/eval.cl"], funcs)   # built once per set of functions, then cached
     d_uv = cla.to_device(q, np.ascontiguousarray(uv, np.float32))
     d_p = cla.to_device(q, np.concatenate([np.asarray(block, np.float32), np.zeros(1, np.float32)]))
     d_out = cla.empty(q, max(1, n) * 12, np.float32)
-    kernel(q, (max(1, n),), None, np.uint32(index), d_uv.data, np.uint32(n), d_p.data, d_out.data)
+    k(q, (max(1, n),), None, np.uint32(index), d_uv.data, np.uint32(n), d_p.data, d_out.data)
     out = d_out.get()[:n * 12].reshape(shape + (4, 3)).astype(np.float64)
     return out[..., 0, :], out[..., 1, :], out[..., 2, :], out[..., 3, :]
 
 
 def measure_throughput(fn: ParametricFunction, side: int = 512, repeats: int = 3, block=None) -> float:
-    """Positions per second of ``fn`` on the OpenCL device (kernels/eval.cl, eval_throughput): the
+    """Positions per second of ``fn`` on the OpenCL device (kernels/common/eval.cl, eval_throughput): the
     best of ``repeats`` timed launches over a side x side grid of its domain, after one warm-up.
     For ``paramlod bench``; never asserted in tests."""
     import time
 
     import pyopencl.array as cla
 
-    from paramlod.device.context import cl_device
-    from paramlod.function.programs import build
-
     q = cl_device().queue
-    kernel = build(["common/eval.cl"], [fn]).eval_throughput
+    throughput = build(["common/eval.cl"], [fn]).eval_throughput
     if block is None:
         block = fn.param_block()
     d_p = cla.to_device(q, np.concatenate([np.asarray(block, np.float32), np.zeros(1, np.float32)]))
@@ -235,7 +218,7 @@ def measure_throughput(fn: ParametricFunction, side: int = 512, repeats: int = 3
     for k in range(repeats + 1):
         q.finish()
         t0 = time.perf_counter()
-        kernel(q, (side, side), None, *args)
+        throughput(q, (side, side), None, *args)
         q.finish()
         if k:  # the first launch warms up
             best = min(best, time.perf_counter() - t0)

@@ -13,13 +13,16 @@ import difflib
 import importlib
 import os
 import pkgutil
+import sys
 from functools import lru_cache
 from pathlib import Path
 
 from paramlod.errors import FunctionError
 from paramlod.function.define import ParametricFunction
+from paramlod.function.plugins import load_entry_points, load_plugin_folder, validate
 
 ENV_VAR = "PARAMLOD_FUNCTIONS_PATH"
+BUILTIN_PACKAGE = "paramlod.functions"   # the built-in plugins: loaded as data, by name, on first use
 
 _plugin_paths: list[Path] = []                          # from add_plugin_path, in call order
 _folder_cache: dict[Path, list[ParametricFunction]] = {}
@@ -28,8 +31,9 @@ _entry_point_cache: dict[tuple, list[ParametricFunction]] = {}
 
 @lru_cache(maxsize=1)
 def builtin_functions() -> dict[str, ParametricFunction]:
-    import paramlod.functions as pkg
-
+    # imported by name, not with an import statement: plugins use the public API (``paramlod``),
+    # which is only complete once this room has been imported
+    pkg = importlib.import_module(BUILTIN_PACKAGE)
     found: dict[str, ParametricFunction] = {}
     for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
@@ -86,8 +90,6 @@ def refresh() -> None:
 
 def _load_folder(path: Path) -> list[ParametricFunction]:
     if path not in _folder_cache:
-        from paramlod.function.plugins import load_plugin_folder, validate
-
         skip = {id(f) for f in builtin_functions().values()}
         # two phases: register first, then validate, so that parts can name functions of the same
         # folder (validation expands parts through the registry)
@@ -101,12 +103,8 @@ def _load_folder(path: Path) -> list[ParametricFunction]:
 
 
 def _entry_point_functions() -> list[ParametricFunction]:
-    import sys
-
     key = tuple(sys.path)  # installing or adding a distribution changes what entry points exist
     if key not in _entry_point_cache:
-        from paramlod.function.plugins import load_entry_points, validate
-
         skip = {id(f) for f in builtin_functions().values()}
         _entry_point_cache.clear()
         _entry_point_cache[key] = load_entry_points(skip=skip, check=False)

@@ -10,6 +10,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import pyopencl as cl
 
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, SceneError
@@ -44,8 +45,6 @@ class _Buffer:
         self.ensure(capacity)
 
     def ensure(self, n, keep=0):
-        import pyopencl as cl
-
         if n <= self.capacity:
             return False
         cap = max(1024, 1 << int(np.ceil(np.log2(max(n, 1)))))
@@ -64,8 +63,6 @@ LOD_LOCAL = 32        # work-items measuring one patch together (kernels/lod.cl)
 
 class LodStage:
     def __init__(self, functions):
-        import pyopencl as cl
-
         prog = build(["lod/lod.cl"], functions)
         # one kernel object per step with its arguments bound once (they change only when a
         # buffer grows or the scene, camera buffer or threshold changes): a frame only enqueues
@@ -118,8 +115,6 @@ class LodStage:
         between frames, and each step is a launch of Python and device time); if the last of them
         still splits patches, ``grow`` asks for the stage again with all ``max_steps`` steps. Only
         step ``max_steps`` forces its patches out, so nothing is rendered too coarse meanwhile."""
-        import pyopencl as cl
-
         settings.validate()
         q = cl_device().queue
         src_domains, grid_for, n_init = self._init_for
@@ -159,11 +154,10 @@ class LodStage:
         grid = (min(self.max_groups, max(cap, 1)) * LOD_LOCAL,)
         self.events = [launch(q, k, grid, (LOD_LOCAL,)) for k in self._step_kernels[:steps_n]]
 
-    def read_counters(self):
-        """Wait for the enqueued stage and read its counters back."""
-        import pyopencl as cl
-
-        cl.enqueue_copy(cl_device().queue, self._counts, self.counters)
+    def read_counters(self, wait: bool = True):
+        """Read the enqueued stage's counters back: waiting for them, or (``wait=False``) enqueued
+        for the frame's one wait."""
+        cl.enqueue_copy(cl_device().queue, self._counts, self.counters, is_blocking=wait)
 
     def grow(self, settings: LodSettings) -> bool:
         """After the stage's read-back: grow the buffers that overflowed, or the step count if
@@ -215,8 +209,6 @@ class LodStage:
                 "or lower max_steps")
 
     def read_render_list(self, n) -> np.ndarray:
-        import pyopencl as cl
-
         out = np.empty(n, RENDER_DTYPE)
         if n:
             cl.enqueue_copy(cl_device().queue, out, self.render.buf)

@@ -18,8 +18,8 @@ geometry against the coarse one per sample; at a pixel where objects of differen
 partially, merging resolved frames approximates that per-sample test by the per-pixel "over"
 (docs/tessellation.md).
 
-``split_by_variant`` and ``render_mixed`` build such a frame for a scene whose objects use
-different variants.
+The frame driver (``paramlod.pipeline.driver``) composites the passes of a scene whose objects
+use different variants or anti-aliasing modes.
 """
 from __future__ import annotations
 
@@ -28,8 +28,8 @@ from typing import Sequence
 
 import numpy as np
 
+from paramlod.core.frame import Frame, FrameStats
 from paramlod.errors import SceneError
-from paramlod.core.frame import Frame
 
 
 def _samples_per_pixel(frame: Frame) -> float:
@@ -91,89 +91,18 @@ def composite(frames: Sequence[Frame], background=None) -> Frame:
     out.background = tuple(background) if background is not None else fs[0].background
     ms = (time.perf_counter() - t0) * 1e3
     parts_ms = sum(float(f.stats.get("ms", {}).get("total", 0.0)) for f in fs if isinstance(f.stats, dict))
-    out.stats = {
+    out.stats = FrameStats({
         "variant": "composite",
+        "device": ", ".join(dict.fromkeys(str(f.stats.get("device", "")) for f in fs)),
         "size": list(size),
-        "parts": [dict(f.stats) for f in fs],
+        "supersample": max(int(f.stats.get("supersample", 1)) for f in fs),
+        "render_patches": sum(int(f.stats.get("render_patches", 0)) for f in fs),
+        "warnings": [w for f in fs for w in f.stats.get("warnings", [])],
+        "passes": [dict(f.stats) for f in fs],
         "order": [f.stats.get("variant", "?") + (f" ({f.stats['aa_effective']})" if "aa_effective" in f.stats else "")
                   for f in fs],
         "samples_per_pixel": max(_samples_per_pixel(f) for f in fs),
         "pixels_written": int(np.count_nonzero(covered)),
         "ms": {"composite": ms, "total": parts_ms + ms},
-    }
+    })
     return out
-
-
-def subscene(scene, objects, surfels=()):
-    """A scene that draws only ``objects`` (SceneObjects of ``scene``) and ``surfels`` (its
-    SurfelObjects), keeping their object ids, background and time, so that frames of several
-    subscenes composite into the whole scene."""
-    from paramlod.scene.scene import Scene
-
-    sub = Scene(background=scene.background, time=scene.time)
-    ids = {id(o) for o in scene.objects}
-    for o in objects:
-        if id(o) not in ids:
-            raise SceneError("subscene: an object does not belong to the scene")
-    sub.objects = list(objects)
-    sub.surfels = list(surfels)
-    sub.touch()
-    return sub
-
-
-def split_by_variant(scene, variants) -> dict[str, object]:
-    """{variant: subscene} for ``variants``, one variant name per object of ``scene`` (a sequence)
-    or a mapping {object index (0-based) or SceneObject: variant} with "points" for the rest."""
-    objs = list(scene.objects)
-    if isinstance(variants, dict):
-        per = ["points"] * len(objs)
-        for key, var in variants.items():
-            if isinstance(key, int):
-                if not 0 <= key < len(objs):
-                    raise SceneError(f"variant for object index {key}, but the scene has {len(objs)} objects")
-                per[key] = var
-            else:
-                matches = [i for i, o in enumerate(objs) if o is key]
-                if not matches:
-                    raise SceneError("variant given for an object that is not in the scene")
-                per[matches[0]] = var
-    else:
-        per = list(variants)
-        if len(per) != len(objs):
-            raise SceneError(f"{len(per)} variants given for a scene of {len(objs)} objects")
-    groups: dict[str, list] = {}
-    for o, var in zip(objs, per):
-        if not isinstance(var, str):
-            raise SceneError(f"a variant must be a name such as 'points' or 'tess', got {var!r}")
-        groups.setdefault(var, []).append(o)
-    # surfels are points: they go with the point-based objects
-    if scene.surfels:
-        groups.setdefault("points", [])
-    return {var: subscene(scene, objs_, scene.surfels if var == "points" else ())
-            for var, objs_ in groups.items()}
-
-
-def render_mixed(scene, camera, variants, settings=None, tess_settings=None) -> Frame:
-    """Render each object of ``scene`` with its variant and composite the frames by depth.
-
-    ``variants``: as in ``split_by_variant``; names are "points", "tess", or "tess:<AA mode>" (for
-    example "tess:4xSS+8xMS") to give tessellated objects their own anti-aliasing.
-    ``settings`` is a RenderSettings (LOD and point settings); ``tess_settings`` a TessSettings.
-    """
-    from dataclasses import replace
-
-    from paramlod.pipeline.driver import RenderSettings, render
-    from paramlod.renderers.tess import TessSettings, render_tess
-
-    settings = settings or RenderSettings()
-    base = tess_settings or TessSettings()
-    frames = []
-    for var, sub in split_by_variant(scene, variants).items():
-        if var == "points":
-            frames.append(render(sub, camera, variant="points", settings=settings))
-        elif var == "tess" or var.startswith("tess:"):
-            ts = replace(base, aa=var.split(":", 1)[1]) if ":" in var else base
-            frames.append(render_tess(sub, camera, ts, settings.lod))
-        else:
-            raise SceneError(f"unknown variant '{var}' for a mixed scene (use 'points', 'tess' or 'tess:<AA mode>')")
-    return composite(frames, background=scene.background)

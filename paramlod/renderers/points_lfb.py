@@ -15,13 +15,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import time
+
+import pyopencl as cl
+import pyopencl.array as cla
+from pyopencl.scan import ExclusiveScanKernel
+
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, DeviceError, SceneError
-from paramlod.core.frame import Frame
-from paramlod.renderers.points import PointSettings
-from paramlod.renderers.targets import srgb_device_tables
-from paramlod.renderers.points_reference import tile_grid
 from paramlod.function.programs import kernel
+from paramlod.lod.stage import LodStage
+from paramlod.lod.uploads import SceneBuffers
+from paramlod.renderers.registry import RendererSpec, register_renderer
+from paramlod.renderers.sampling import PointSettings
+from paramlod.renderers.shading import LIGHT
+from paramlod.renderers.targets import srgb_device_tables
 
 # kernels/points_lfb.cl C_* counters, same order
 LFB_COUNTERS = ("tile_patch_pairs", "unplaced_patches", "samples", "samples_unique", "nan_samples",
@@ -59,6 +67,11 @@ class SsaaSettings(PointSettings):
         return np.float32(self.density * self.oversample * self.ss / (1.0 - self.epsilon))
 
 
+def tile_grid(width: int, height: int, tile: int = TILE) -> tuple[int, int]:
+    """Tiles across and down a width x height frame."""
+    return -(-int(width) // tile), -(-int(height) // tile)
+
+
 def _round_up(n, m):
     return max(m, (n + m - 1) // m * m)
 
@@ -69,9 +82,6 @@ class LocalFramebufferRenderer:
 
     def __init__(self, functions, record: bool = False, tile: int = TILE, chunk: int = 64,
                  local_size: int = 64):
-        import pyopencl as cl
-        from pyopencl.scan import ExclusiveScanKernel
-
         if tile not in (4, 8, 16, 32):
             raise SceneError(f"points-ssaa tile must be 4, 8, 16 or 32 pixels, got {tile}")
         if not 1 <= chunk <= 1024:
@@ -112,9 +122,6 @@ class LocalFramebufferRenderer:
         return k
 
     def _ensure(self, n_tiles, n_patches, n_pairs):
-        import pyopencl as cl
-        import pyopencl.array as cla
-
         q, ctx = cl_device().queue, cl_device().context
         if n_tiles != self.n_tiles:
             self.tile_count = cla.empty(q, n_tiles, np.uint32)
@@ -134,8 +141,6 @@ class LocalFramebufferRenderer:
 
         Returns the counters (LFB_COUNTERS) plus tile statistics. ``record_args`` (with
         ``record=True``): rec_offset, rec_sub, rec_key, rec_aux buffers, see points_lfb.cl."""
-        import pyopencl as cl
-
         settings.validate()
         k_count, k_fill, k_render = self.kernels(settings.ss)
         q = cl_device().queue
@@ -186,12 +191,44 @@ class LocalFramebufferRenderer:
         return stats
 
 
-def render_points_ssaa(scene, camera, settings: SsaaSettings | None = None, lod=None) -> Frame:
-    """Render ``scene`` with the local-framebuffer variant (``paramlod.render(variant="points-ssaa")``).
+class LocalFramebufferPoints:
+    """Per-scene state of the "points-ssaa" variant. Its tile lists are sized on the host, so it
+    waits for the LOD stage's patch count and for its scan inside the frame (the one variant that
+    does; the LOD thresholds are divided by ``SsaaSettings.lod_divisor``)."""
 
-    ``lod`` is a LodSettings; its threshold is divided by ``settings.lod_divisor``."""
-    from paramlod.lod.stage import LodSettings
-    from paramlod.pipeline.driver import RenderSettings, render
+    def __init__(self, functions, record: bool = False):
+        self.buffers = SceneBuffers(LIGHT)
+        self.lod = LodStage(functions)
+        self.lfb = LocalFramebufferRenderer(functions, record=record)
+        self.dev, self._counters, self._ms = None, {}, 0.0
 
-    rs = RenderSettings(lod=lod or LodSettings(), ssaa=settings or SsaaSettings())
-    return render(scene, camera, variant="points-ssaa", settings=rs)
+    def prepare(self, scene, camera, settings):
+        settings.ssaa.validate()
+        self.dev = self.buffers.upload(scene, camera)
+
+    def enqueue(self, target, settings):
+        d = self.dev
+        while True:
+            self.lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, t_div=settings.ssaa.lod_divisor)
+            self.lod.read_counters()
+            if not self.lod.grow(settings.lod):
+                break
+        t0 = time.perf_counter()
+        self._counters = self.lfb.draw(self.lod.render.buf, self.lod.result()[0], d["inst"], d["materials"],
+                                       d["cam"], d["light"], target, settings.ssaa)
+        self._ms = (time.perf_counter() - t0) * 1e3   # wall time: it waits for its scan and bins
+
+    def collect(self):
+        pass
+
+    def grow(self, settings) -> bool:
+        return False
+
+    def stats(self) -> dict:
+        n, steps = self.lod.result()
+        return {"render_patches": n, "lod_steps": steps, "forced_patches": sum(s["forced"] for s in steps),
+                **self._counters, "ms": {"lod": self.lod.device_ms(), "render": self._ms}}
+
+
+register_renderer(RendererSpec("points-ssaa", "parametric", LocalFramebufferPoints, "ssaa", "keys", SsaaSettings,
+                               "2x2 or 3x3 subsamples per pixel in a local framebuffer per 16x16 tile"))

@@ -12,33 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from paramlod.core.color import LIN_BITS, srgb_tables  # noqa: F401  (the twin's tables)
+from paramlod.renderers.points_lfb import tile_grid
+
 CLEAR = np.uint64(0xFFFFFFFFFFFFFFFF)
-LIN_BITS = 24   # fixed-point scale of linear colour in the resolve: 9 x 2^24 fits in 32 bits
-
-
-def _srgb_to_linear(s: np.ndarray) -> np.ndarray:
-    return np.where(s <= 0.04045, s / 12.92, ((s + 0.055) / 1.055) ** 2.4)
-
-
-def srgb_tables() -> tuple[np.ndarray, np.ndarray]:
-    """(lin, thr), uint32 [256] each: lin[c] = linear value of sRGB code c in 2^-24 units;
-    thr[c] = linear value of code c - 1/2 (thr[0] = 0), so encoding x gives the largest c with
-    thr[c] <= x, the nearest code in sRGB space."""
-    scale = float(1 << LIN_BITS)
-    codes = np.arange(256, dtype=np.float64)
-    lin = np.rint(_srgb_to_linear(codes / 255.0) * scale).astype(np.uint32)
-    thr = np.rint(_srgb_to_linear(np.maximum(codes - 0.5, 0.0) / 255.0) * scale).astype(np.uint32)
-    thr[0] = 0
-    return lin, thr
-
-
 def encode_srgb8(x: np.ndarray, thr: np.ndarray) -> np.ndarray:
     """Twin of encode_srgb8() in subsamples.cl."""
     return (np.searchsorted(thr, np.asarray(x, np.uint32), side="right") - 1).astype(np.uint32)
-
-
-def tile_grid(width: int, height: int, tile: int = 16) -> tuple[int, int]:
-    return -(-int(width) // tile), -(-int(height) // tile)
 
 
 def tile_rects(render_list: np.ndarray, width: int, height: int, margin: float, widen: float,
@@ -147,3 +127,20 @@ def resolve_blocks(color_ss: np.ndarray, aux_ss: np.ndarray, width: int, height:
     color = np.where(cnt > 0, (kmin & np.uint64(0xFFFFFFFF00000000)) | rgba, CLEAR).astype(np.uint64)
     aux = np.where(cnt > 0, la.min(axis=-1), CLEAR).astype(np.uint64)
     return color, aux, cnt
+
+
+def resolve_image(color_keys: np.ndarray, background_code) -> np.ndarray:
+    """Twin of the image of resolve() in kernels/points/resolve.cl: colour keys (h, w) -> sRGB8 RGB
+    (h, w, 3) over the background (its sRGB8 codes), blended in linear fixed point."""
+    lin, thr = srgb_tables()
+    k = np.asarray(color_keys, np.uint64)
+    rgba = (k & np.uint64(0xFFFFFFFF)).astype(np.uint32)
+    al = (rgba & 255).astype(np.uint64)
+    out = np.empty((*k.shape, 3), np.uint8)
+    for c in range(3):
+        code = (rgba >> np.uint32(24 - 8 * c)) & 255
+        bg = np.uint64(background_code[c])
+        mixed = (lin[code].astype(np.uint64) * al + np.uint64(lin[int(bg)]) * (255 - al) + 127) // 255
+        value = np.where(al == 255, code, encode_srgb8(mixed.astype(np.uint32), thr))
+        out[..., c] = np.where(k == CLEAR, np.uint32(bg), value)
+    return out

@@ -8,39 +8,57 @@ from __future__ import annotations
 
 import numpy as np
 
-from paramlod.device.context import cl_device
+import weakref
+
+import pyopencl as cl
+import pyopencl.array as cla
+
+from paramlod.core.color import linear_to_srgb8, srgb_tables
 from paramlod.core.frame import Frame
+from paramlod.device.context import cl_device
 from paramlod.device.programs import build, launch
 
 
 class KeyBuffer:
-    def __init__(self, width: int, height: int):
-        import pyopencl as cl
+    """The colour and aux keys of ``width`` x ``height`` pixels (or subsamples), and, once
+    resolved, the Frame arrays, the 8-bit image and the frame's counters on the device.
 
-        self.width, self.height = int(width), int(height)
+    ``ss``: subsamples per pixel side the keys' alpha stands for (the resolve counts covered
+    subsamples with it)."""
+
+    def __init__(self, width: int, height: int, ss: int = 1):
+        self.width, self.height, self.ss = int(width), int(height), int(ss)
         n = self.width * self.height
         ctx = cl_device().context
         self.color = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self.aux = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
-        self._out = None   # the resolved Frame arrays on the device: made by the first resolve
+        self._out = None   # the resolved arrays on the device: made by the first resolve
         self._resolve = None
+        self._counts = np.zeros(2, np.uint32)
+        self._frame = None   # the lazy Frame reading the resolved arrays (weak)
+        self.background = None
 
     @property
     def pixel_count(self) -> int:
         return self.width * self.height
 
     def clear(self):
-        import pyopencl as cl
-
+        """Clear the keys to all ones; a lazy Frame still reading the last resolve copies its
+        arrays first."""
+        self.release_frame()
         q = cl_device().queue
         ones = np.uint64(0xFFFFFFFFFFFFFFFF)
         cl.enqueue_fill_buffer(q, self.color, ones, 0, self.pixel_count * 8)
         cl.enqueue_fill_buffer(q, self.aux, ones, 0, self.pixel_count * 8)
 
+    def release_frame(self):
+        frame = self._frame() if self._frame is not None else None
+        if frame is not None:
+            frame.materialize()
+        self._frame = None
+
     def read_keys(self) -> tuple[np.ndarray, np.ndarray]:
         """The raw colour and aux keys, uint64 (h, w) each."""
-        import pyopencl as cl
-
         q = cl_device().queue
         c = np.empty((self.height, self.width), np.uint64)
         a = np.empty_like(c)
@@ -48,55 +66,86 @@ class KeyBuffer:
         cl.enqueue_copy(q, a, self.aux)
         return c, a
 
-    def resolve(self) -> Frame:
-        """Decode the keys and copy the result to the host as a Frame."""
-        self.resolve_on_device()
-        return self.read_frame()
+    def resolve(self, background=(0.0, 0.0, 0.0)) -> Frame:
+        """Decode the keys and return the Frame (waits)."""
+        self.resolve_on_device(background)
+        self.read_counts()
+        cl_device().queue.finish()
+        return self.frame(background)
 
-    def resolve_on_device(self):
-        """Decode the keys into colour, depth, normal and id buffers on the device (enqueued;
-        returns the kernel's event)."""
-        import pyopencl as cl
-
+    def resolve_on_device(self, background=(0.0, 0.0, 0.0)):
+        """Enqueue the decode of the keys into colour, depth, normal, id and image buffers and the
+        counters on the device (returns the kernel's event). ``background``: linear RGB the image
+        is composited over."""
         n = self.pixel_count
         if self._resolve is None:   # a supersampled buffer is only downsampled, never resolved
-            self._out = [cl.Buffer(cl_device().context, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4)]
-            # this buffer's own kernel object, its arguments set once
-            self._resolve = cl.Kernel(build(["common/keys.cl", "points/resolve.cl"]), "resolve")
-            self._resolve.set_args(self.color, self.aux, np.uint32(n), *self._out)
-        return launch(cl_device().queue, self._resolve, ((n + 255) // 256 * 256,))
+            ctx = cl_device().context
+            self._out = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4, 4)]
+            self._count_buf = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 8)
+            lin, thr = srgb_device_tables()
+            # this buffer's own kernel object, its arguments set once but for the background
+            self._resolve = cl.Kernel(build(["common/keys.cl", "points/subsamples.cl", "points/resolve.cl"],
+                                            defines={"PL_SS_COUNT": self.ss * self.ss}), "resolve")
+            self._resolve.set_args(self.color, self.aux, np.uint32(n), *self._out, np.uint32(0), lin.data,
+                                   thr.data, self._count_buf)
+        self.background = tuple(float(x) for x in background)
+        bg = linear_to_srgb8(np.asarray(self.background, np.float32)).astype(np.uint32)
+        self._resolve.set_arg(8, np.uint32((bg[0] << 24) | (bg[1] << 16) | (bg[2] << 8) | 255))
+        q = cl_device().queue
+        cl.enqueue_fill_buffer(q, self._count_buf, np.uint32(0), 0, 8)
+        return launch(q, self._resolve, ((n + 255) // 256 * 256,), (256,))
+
+    def read_counts(self):
+        """Enqueue the copy of the resolve's counters (read after the frame's wait: ``counts``)."""
+        cl.enqueue_copy(cl_device().queue, self._counts, self._count_buf, is_blocking=False)
+
+    @property
+    def counts(self) -> dict:
+        """{"pixels_written", "covered_subsamples"} of the last resolve (after the frame's wait)."""
+        return {"pixels_written": int(self._counts[0]), "covered_subsamples": int(self._counts[1])}
+
+    def frame(self, background=None) -> Frame:
+        """A Frame that reads the last resolve lazily (valid until these keys are cleared, when it
+        copies what it has not read yet)."""
+        frame = Frame(source=_ResolvedArrays(self), size=(self.width, self.height),
+                      background=self.background if background is None else background)
+        self._frame = weakref.ref(frame)
+        return frame
 
     def read_frame(self) -> Frame:
-        """Copy the resolved buffers to the host as a Frame (after resolve_on_device())."""
-        import pyopencl as cl
-
-        q = cl_device().queue
-        h, w = self.height, self.width
-        color = np.empty((h, w, 4), np.float32)
-        depth = np.empty((h, w), np.float32)
-        normal = np.empty((h, w, 4), np.float32)
-        ids = np.empty((h, w), np.uint32)
-        for host, dev in zip((color, depth, normal, ids), self._out):
-            cl.enqueue_copy(q, host, dev)
-        q.finish()
-        return Frame(color=color, depth=depth, normal=np.ascontiguousarray(normal[..., :3]), object_id=ids)
+        """Copy every resolved array to the host as a Frame (after resolve_on_device())."""
+        return self.frame().materialize()
 
 
-_srgb_device: dict = {}
+class _ResolvedArrays:
+    """Reads one resolved array of a KeyBuffer on request (a Frame's device source)."""
+
+    _SLOTS = {"color": (0, np.float32, 4), "depth": (1, np.float32, 0), "normal": (2, np.float32, 4),
+              "object_id": (3, np.uint32, 0), "image": (4, np.uint8, 4)}
+
+    def __init__(self, keys: KeyBuffer):
+        self.keys, self.background = keys, keys.background
+
+    def read(self, name: str) -> np.ndarray:
+        k = self.keys
+        slot, dtype, channels = self._SLOTS[name]
+        shape = (k.height, k.width, channels) if channels else (k.height, k.width)
+        out = np.empty(shape, dtype)
+        cl.enqueue_copy(cl_device().queue, out, k._out[slot])
+        if name == "normal":
+            return np.ascontiguousarray(out[..., :3])
+        if name == "image":
+            return np.ascontiguousarray(out[..., :3])
+        return out
 
 
 def srgb_device_tables():
-    """The (lin, thr) tables of points_reference.srgb_tables on the device (uploaded once per
+    """The (lin, thr) tables of paramlod.core.color.srgb_tables on the device (uploaded once per
     context): both subsample resolves (kernels/subsamples.cl) read them."""
-    import pyopencl.array as cla
-
-    from paramlod.renderers.points_reference import srgb_tables
-
     dev = cl_device()
-    key = id(dev.context)
-    if key not in _srgb_device:
-        _srgb_device[key] = tuple(cla.to_device(dev.queue, t) for t in srgb_tables())
-    return _srgb_device[key]
+    if "srgb_tables" not in dev.cache:
+        dev.cache["srgb_tables"] = tuple(cla.to_device(dev.queue, t) for t in srgb_tables())
+    return dev.cache["srgb_tables"]
 
 
 class Downsample:
@@ -105,8 +154,6 @@ class Downsample:
     averaged over the covered subsamples in linear light, alpha = coverage, nearest depth."""
 
     def __init__(self, ss: int):
-        import pyopencl as cl
-
         self.ss = int(ss)
         self.kernel = cl.Kernel(build(["common/keys.cl", "points/subsamples.cl"], defines={"PL_SS": self.ss}), "downsample_keys")
         self.tables = srgb_device_tables()

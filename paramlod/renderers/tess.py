@@ -20,22 +20,26 @@ details, including how cracks between patches are avoided.
 from __future__ import annotations
 
 import math
-import re
 import time
 import warnings
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
 from paramlod import kernels
-
 from paramlod.core.camera import Camera
-from paramlod.function.codegen_glsl import glsl_dispatch_source
-from paramlod.device.context import gl_context
-from paramlod.errors import DeviceError, FunctionError, SceneError
 from paramlod.core.frame import Frame
-from paramlod.lod.patches import RENDER_DTYPE
+from paramlod.device.context import cl_device, gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines
+from paramlod.errors import DeviceError, FunctionError, SceneError
+from paramlod.function.codegen_glsl import glsl_dispatch_source
+from paramlod.lod.patches import RENDER_DTYPE
+from paramlod.lod.stage import LodStage
+from paramlod.lod.uploads import SceneBuffers
+from paramlod.renderers.aa import AAMode, cap_samples, lod_divisor, parse_aa  # noqa: F401  (lod_divisor re-exported)
+from paramlod.renderers.registry import RendererSpec, register_renderer
+from paramlod.renderers.shading import LIGHT
 from paramlod.scene.scene import Scene
 
 # Highest tessellation level allowed: GL_MAX_TESS_GEN_LEVEL is at least 64 on every GL 4.x device.
@@ -43,91 +47,6 @@ MAX_LEVEL = 64.0
 # llvmpipe: worst-case generated vertices per draw call (see TessRenderer.patches_per_draw)
 LLVMPIPE_VERTEX_BUDGET = 60000
 SPACINGS = {"equal": "equal_spacing", "fractional_odd": "fractional_odd_spacing"}
-_MS_ALIASES = {f"msaa{n}": n for n in (2, 4, 8)}
-_SS_ALIASES = {f"ssaa{n}x{n}": n for n in (2, 3, 4)}
-
-
-# --- anti-aliasing modes ------------------------------------------------------------------------
-@dataclass(frozen=True)
-class AAMode:
-    """``ss`` x ``ss`` supersampling (1 = none) combined with ``msaa`` multisamples (1 = none)."""
-
-    ss: int = 1
-    msaa: int = 1
-
-    @property
-    def samples_per_pixel(self) -> int:
-        return self.ss * self.ss * self.msaa
-
-    def divisor(self, msaa_lod: bool = False) -> float:
-        """LOD threshold divisor: ``ss``, so the LOD stage measures patches in the supersampled
-        target's pixels (the thesis's 4xSS+8xMS figures: 4x the patches of noAA "due to 4xSS");
-        with ``msaa_lod`` also sqrt(msaa), the hybrid scheme's guideline (sqrt(32) for 4xSS+8xMS)."""
-        return self.ss * (math.sqrt(self.msaa) if msaa_lod else 1.0)
-
-    @property
-    def name(self) -> str:
-        parts = []
-        if self.ss > 1:
-            parts.append(f"{self.ss * self.ss}xSS")
-        if self.msaa > 1:
-            parts.append(f"{self.msaa}xMS")
-        return "+".join(parts) or "noAA"
-
-
-def parse_aa(mode) -> AAMode:
-    """``"noAA"``, ``"8xMS"``, ``"4xSS"``, ``"4xSS+8xMS"``, ``"msaa4"``, ``"ssaa3x3"`` ... -> AAMode."""
-    if isinstance(mode, AAMode):
-        return mode
-    if not isinstance(mode, str) or not mode.strip():
-        raise SceneError(f"anti-aliasing mode must be a string such as 'noAA', '8xMS', '4xSS' or "
-                         f"'4xSS+8xMS', got {mode!r}")
-    text = mode.strip()
-    if text.lower() in ("noaa", "none", "off"):
-        return AAMode()
-    ss, ms = 1, 1
-    for part in (p.strip().lower() for p in text.split("+")):
-        m_ms = re.fullmatch(r"(\d+)x?ms(?:aa)?", part)
-        m_ss = re.fullmatch(r"(\d+)x?ss(?:aa)?", part)
-        if part in _MS_ALIASES or m_ms:
-            n = _MS_ALIASES.get(part) or int(m_ms.group(1))
-            if n not in (2, 4, 8) or ms != 1:
-                raise SceneError(f"anti-aliasing mode {mode!r}: multisampling must be given once, as 2xMS, "
-                                 "4xMS or 8xMS")
-            ms = n
-        elif part in _SS_ALIASES or m_ss:
-            if part in _SS_ALIASES:
-                n = _SS_ALIASES[part]
-            else:
-                total = int(m_ss.group(1))
-                n = math.isqrt(total)
-                if n * n != total or n not in (2, 3, 4):
-                    raise SceneError(f"anti-aliasing mode {mode!r}: supersampling must be 4xSS, 9xSS or 16xSS "
-                                     "(2x2, 3x3, 4x4 samples per pixel)")
-            if ss != 1:
-                raise SceneError(f"anti-aliasing mode {mode!r}: supersampling must be given once")
-            ss = n
-        else:
-            raise SceneError(f"unknown anti-aliasing mode {mode!r}: use noAA, 2xMS, 4xMS, 8xMS, 4xSS, 9xSS, "
-                             "16xSS or a combination such as 4xSS+8xMS")
-    return AAMode(ss, ms)
-
-
-def lod_divisor(mode, max_samples: int | None = None, msaa_lod: bool = False) -> float:
-    """Threshold divisor of an AA mode (``AAMode.divisor``): 2 for 4xSS and 4xSS+8xMS, 1 for 8xMS;
-    with ``msaa_lod`` sqrt(samples per pixel): sqrt(8) for 8xMS, sqrt(32) for 4xSS+8xMS. With
-    ``max_samples`` the multisample count is first capped to what the device supports."""
-    aa = parse_aa(mode)
-    if max_samples is not None and aa.msaa > 1:
-        aa = AAMode(aa.ss, _cap_samples(aa.msaa, max_samples))
-    return aa.divisor(msaa_lod)
-
-
-def _cap_samples(requested: int, max_samples: int) -> int:
-    n = requested
-    while n > 1 and n > max_samples:
-        n //= 2
-    return max(n, 1)
 
 
 # --- settings -----------------------------------------------------------------------------------
@@ -179,8 +98,6 @@ def _stage(defines: dict, body: list[str]) -> str:
 
 
 def _program(ctx, stages: dict, functions) -> object:
-    import moderngl
-
     try:
         return ctx.program(**stages)
     except moderngl.Error as exc:
@@ -194,16 +111,14 @@ def _program(ctx, stages: dict, functions) -> object:
             f"{', stage: ' + stage if stage else ''}).\n{shown}\ncompiler said:\n{log[-2000:]}") from None
 
 
-_programs: dict[tuple, object] = {}
-
-
 def build_programs(ctx, functions, spacing: str):
     """(tessellation program, resolve programs by multisampling) for ``functions``, cached."""
     functions = list(functions)
     # keyed by the function objects: generating the GLSL again just to look it up cost ~150 ms a
     # frame for an order-12 SH glyph
-    key = (id(ctx), tuple(id(f) for f in functions), spacing)
-    progs = _programs.get(key)
+    programs = gl_cache(ctx).setdefault("tess_programs", {})
+    key = (tuple(functions), spacing)
+    progs = programs.get(key)
     if progs is None:
         gen_pos = glsl_dispatch_source(functions, position=True, surface=False)
         gen_surf = glsl_dispatch_source(functions, position=False, surface=True)
@@ -214,21 +129,19 @@ def build_programs(ctx, functions, spacing: str):
             "tess_evaluation_shader": _stage(tess_defs, [gen_surf, kernels.source("tess/tess_eval.glsl")]),
             "fragment_shader": _stage(tess_defs, [kernels.source("tess/tess_fragment.glsl")]),
         }
-        progs = _programs[key] = _program(ctx, stages, functions)
+        progs = programs[key] = _program(ctx, stages, functions)
     return progs
 
 
-_resolve_programs: dict[tuple, object] = {}
-
-
 def _resolve_program(ctx, ss: int, samples: int):
-    key = (id(ctx), ss, samples)
-    prog = _resolve_programs.get(key)
+    programs = gl_cache(ctx).setdefault("tess_resolve_programs", {})
+    key = (ss, samples)
+    prog = programs.get(key)
     if prog is None:
         defs = {"PL_SS": ss, "PL_SAMPLES": samples}
         if samples > 1:
             defs["PL_MS"] = 1
-        prog = _resolve_programs[key] = _program(ctx, {
+        prog = programs[key] = _program(ctx, {
             "vertex_shader": _stage(defs, [kernels.source("tess/tess_resolve_vertex.glsl")]),
             "fragment_shader": _stage(defs, [kernels.source("tess/tess_resolve_fragment.glsl")]),
         }, [])
@@ -352,7 +265,7 @@ class TessRenderer:
         req = parse_aa(mode)
         eff, notes = req, []
         if req.msaa > 1:
-            got = _cap_samples(req.msaa, self.max_samples)
+            got = cap_samples(req.msaa, self.max_samples)
             if got != req.msaa:
                 eff = AAMode(req.ss, got)
                 notes.append(f"{req.msaa}xMS requested but this OpenGL device ({self.ctx.info.get('GL_RENDERER')}) "
@@ -396,8 +309,6 @@ class TessRenderer:
         ``threshold``: the effective LOD thresholds (t_u, t_v) in output pixels that made the list,
         used by adaptive levels; default 84 px divided by ``lod_divisor`` of the AA mode.
         """
-        import moderngl
-
         settings = settings or TessSettings()
         settings.validate()
         if not isinstance(scene, Scene) or not scene.objects:
@@ -445,8 +356,6 @@ class TessRenderer:
             self._scene_key = scene_key
         self._counters.write(np.zeros(4, np.uint32).tobytes())
         t2 = time.perf_counter()
-
-        from paramlod.pipeline.driver import LIGHT
 
         _set(prog, "u_view", _mat(camera.view))
         _set(prog, "u_proj", _mat(camera.projection))
@@ -552,108 +461,54 @@ class TessRenderer:
         return vao
 
 
-# --- the whole frame ----------------------------------------------------------------------------
-def render_tess(scene: Scene, camera: Camera, settings: TessSettings | None = None, lod_settings=None,
-                lod_stage=None) -> Frame:
-    """One frame with the tessellation variant: instance buffers -> LOD stage (thresholds divided
-    by ``lod_divisor`` of the effective AA mode) -> render list to host -> tessellation -> Frame.
+class Tessellation:
+    """Per-scene state of the "tess" variant: the scene's device buffers, its LOD stage (thresholds
+    divided by the effective AA mode's ``lod_divisor``) and the TessRenderer. CL -> GL goes through
+    host memory, so a frame waits for the render list; the Frame is read back from GL."""
 
-    The device buffers, the LOD stage and this TessRenderer are those of ``paramlod.render``'s
-    Renderer for the scene's functions (instance buffers are sent once per scene change);
-    ``lod_stage`` overrides the LOD stage."""
-    from paramlod.device.context import cl_device
-    from paramlod.lod.stage import LodSettings
-    from paramlod.pipeline.driver import renderer_for
+    def __init__(self, functions, record: bool = False):
+        self.buffers = SceneBuffers(LIGHT)
+        self.lod = LodStage(functions)
+        self.tess = TessRenderer(functions)
+        self.scene = self.dev = None
 
-    if not isinstance(scene, Scene) or not scene.objects:
-        raise SceneError("the scene has no objects; add one with scene.add(...)")
-    settings = settings or TessSettings()
-    settings.validate()
-    lod_settings = lod_settings or LodSettings()
-    lod_settings.validate()
-    t0 = time.perf_counter()
-    r = renderer_for(scene)
-    lod_stage = lod_stage or r.lod
-    tess = r.tess_renderer()
-    _, aa, _ = tess.effective_aa(settings.aa)
-    div = aa.divisor(settings.msaa_lod)
-    dev = r.upload(scene, camera)
-    inst, domains, cam = dev["inst"], dev["domains"], dev["cam"]
-    t1 = time.perf_counter()
-    _, n, steps, lod_ms = lod_stage.run(inst, domains, cam, lod_settings, t_div=div)
-    t2 = time.perf_counter()
-    records = lod_stage.read_render_list(n)
-    t3 = time.perf_counter()
-    tu, tv = (t / div for t in lod_settings.threshold)
-    frame = tess.draw(records, n, scene, camera, settings, threshold=(tu, tv))
-    t4 = time.perf_counter()
-    ms = frame.stats["ms"]
-    ms["render_list_read"] = (t3 - t2) * 1e3
-    ms["render_list"] = ms["render_list_read"] + ms["render_list_upload"]
-    ms["upload"] = (t1 - t0) * 1e3
-    ms["lod"] = lod_ms
-    ms["total"] = (t4 - t0) * 1e3
-    frame.stats.update({
-        "lod_device": cl_device().name,
-        "lod_steps": steps,
-        "forced_patches": sum(s["forced"] for s in steps),
-        "render_list_bytes": int(n) * RENDER_DTYPE.itemsize,
-    })
-    return frame
+    def prepare(self, scene, camera, settings):
+        settings.tess.validate()
+        settings.lod.validate()
+        self.scene = scene
+        t0 = time.perf_counter()
+        self.dev = self.buffers.upload(scene, camera)
+        self._upload_ms = (time.perf_counter() - t0) * 1e3
+
+    def enqueue(self, camera, settings) -> Frame:
+        t0 = time.perf_counter()
+        _, aa, _ = self.tess.effective_aa(settings.tess.aa)
+        div = aa.divisor(settings.tess.msaa_lod)
+        d = self.dev
+        _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], settings.lod, t_div=div)
+        t1 = time.perf_counter()
+        records = self.lod.read_render_list(n)
+        t2 = time.perf_counter()
+        tu, tv = (t / div for t in settings.lod.threshold)
+        frame = self.tess.draw(records, n, self.scene, camera, settings.tess, threshold=(tu, tv))
+        t3 = time.perf_counter()
+        ms = frame.stats["ms"]
+        ms["render_list_read"] = (t2 - t1) * 1e3
+        ms["render_list"] = ms["render_list_read"] + ms["render_list_upload"]
+        ms["upload"] = self._upload_ms
+        ms["lod"] = lod_ms
+        ms["render"] = ms["draw"]
+        ms["frame"] = (t3 - t0) * 1e3 + self._upload_ms - ms["readback"]
+        ms["total"] = (t3 - t0) * 1e3 + self._upload_ms
+        frame.stats.update({
+            "lod_device": cl_device().name,
+            "lod_steps": steps,
+            "forced_patches": sum(s["forced"] for s in steps),
+            "render_list_bytes": int(n) * RENDER_DTYPE.itemsize,
+        })
+        return frame
 
 
-# --- probe: the generated GLSL evaluated on the device ------------------------------------------
-_probes: dict[tuple, object] = {}
-
-
-def glsl_surface(fn, u, v, block=None, **params):
-    """(position, df/du, df/dv) of ``fn`` evaluated by the generated GLSL on the GL device, each
-    float32 broadcast(u, v) + (3,): the twin of ``fn.surface`` (numpy) for tests and debugging."""
-    import moderngl
-
-    from paramlod.function.registry import get_function
-
-    fn = get_function(fn)
-    u = np.asarray(u, np.float32)
-    v = np.asarray(v, np.float32)
-    shape = np.broadcast_shapes(u.shape, v.shape)
-    uv = np.stack([np.broadcast_to(u, shape).reshape(-1), np.broadcast_to(v, shape).reshape(-1)], axis=1)
-    if block is None:
-        block = fn.param_block(params)
-    block = np.concatenate([np.asarray(block, np.float32).reshape(-1), np.zeros(1, np.float32)])
-    ctx = gl_context()
-    gen = glsl_dispatch_source([fn], position=False, surface=True)
-    key = (id(ctx), gen)
-    prog = _probes.get(key)
-    if prog is None:
-        src = _stage({}, [gen, kernels.source("tess/tess_probe.glsl")])
-        try:
-            prog = ctx.program(vertex_shader=src, varyings=["out_pos", "out_du", "out_dv"])
-        except moderngl.Error as exc:
-            raise FunctionError(f"the generated GLSL of '{fn.name}' ({fn.source}) does not compile.\n"
-                                f"{context_lines(src, str(exc), GLSL_LINE)}\ncompiler said:\n{str(exc)[-2000:]}") from None
-        _probes[key] = prog
-    n = len(uv)
-    if n == 0:
-        empty = np.zeros((*shape, 3), np.float32)
-        return empty, empty.copy(), empty.copy()
-    vbo = ctx.buffer(np.ascontiguousarray(uv).tobytes())
-    out = ctx.buffer(reserve=n * 36)
-    pbuf = ctx.buffer(block.tobytes())
-    try:
-        pbuf.bind_to_storage_buffer(0)
-        _set(prog, "u_func", 0)
-        _set(prog, "u_param_offset", 0)
-        vao = ctx.vertex_array(prog, [(vbo, "2f", "in_uv")])
-        # a draw needs a complete framebuffer even with rasterization off; the EGL context has none
-        fbo = _probes.get("fbo")
-        if fbo is None:
-            fbo = _probes["fbo"] = ctx.framebuffer([ctx.renderbuffer((1, 1))])
-        fbo.use()
-        vao.transform(out, mode=moderngl.POINTS, vertices=n)
-        res = np.frombuffer(out.read(), np.float32).reshape(n, 3, 3)
-        vao.release()
-    finally:
-        for b in (vbo, out, pbuf):
-            b.release()
-    return tuple(np.ascontiguousarray(res[:, k].reshape(*shape, 3)) for k in range(3))
+register_renderer(RendererSpec("tess", "parametric", Tessellation, "tess", "gl", TessSettings,
+                               "OpenGL 4.5 hardware tessellation of the render patches, noAA/MSAA/SSAA",
+                               takes_aa="all"))

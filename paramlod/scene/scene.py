@@ -16,6 +16,7 @@ import numpy as np
 from paramlod.errors import FunctionError, SceneError
 from paramlod.function.define import ParametricFunction
 from paramlod.function.registry import get_function
+from paramlod.scene.loaders import load
 from paramlod.core.transforms import matrix as _as_matrix
 
 # Per-instance float record (see kernels/common.cl, INST_* offsets): 4x4 model matrix (row-major),
@@ -53,6 +54,8 @@ class SceneObject:
     per_instance: dict = field(default_factory=dict)   # name -> array [count] or [count, size]
     transforms: np.ndarray | None = None               # [count, 4, 4] or None
     colors: np.ndarray | None = None                   # [count, 3] linear RGB, or None
+    variant: str | None = None   # the renderer that draws it ("points", "tess", ...); None: the frame's
+    aa: str | None = None        # its anti-aliasing mode ("4xSS", "4xSS+8xMS", ...); None: the frame's
 
 
 @dataclass
@@ -61,7 +64,7 @@ class SurfelObject:
 
     surfels: object            # paramlod.surfels.SurfelSet
     transform: np.ndarray
-    strategy: object           # FixedSize (default 2 px), FixedCount or FrameTimeAdaptive
+    strategy: object           # FixedSize, FixedCount, FrameTimeAdaptive; None: FixedSize(2 px)
     object_id: int
     specular: float = 0.25
 
@@ -100,19 +103,26 @@ class Scene:
         self._version = next(_versions)
         self._cache = None
 
-    def add(self, fn_or_name, params: dict | None = None, transform=None, material: Material | None = None) -> SceneObject:
-        """Add one object; ``params`` override the function's defaults."""
-        return self.add_instances(fn_or_name, 1, params=params, transform=transform, material=material)
+    def add(self, fn_or_name, params: dict | None = None, transform=None, material: Material | None = None,
+            variant: str | None = None, aa: str | None = None) -> SceneObject:
+        """Add one object; ``params`` override the function's defaults; ``variant`` and ``aa`` pick
+        its renderer and anti-aliasing (default: those of the frame)."""
+        return self.add_instances(fn_or_name, 1, params=params, transform=transform, material=material,
+                                  variant=variant, aa=aa)
 
     def add_instances(self, fn_or_name, count: int, params: dict | None = None, per_instance: dict | None = None,
                       transforms=None, transform=None, material: Material | None = None,
-                      colors=None) -> SceneObject:
+                      colors=None, variant: str | None = None, aa: str | None = None) -> SceneObject:
         """Add ``count`` instances of one function as one object (one object id, one material).
 
         ``per_instance`` maps parameter names to arrays with ``count`` rows; ``transforms`` is an
         optional [count, 4, 4] array applied before ``transform``; ``colors`` an optional
         [count, 3] array of linear RGB in [0, 1] that replaces the material colour per instance.
+        ``variant`` and ``aa``: as in ``add``.
         """
+        for name, value in (("variant", variant), ("aa", aa)):
+            if value is not None and not (isinstance(value, str) and value.strip()):
+                raise SceneError(f"{name} must be a name such as 'points', 'tess' or '4xSS', got {value!r}")
         fn = get_function(fn_or_name)
         if self.object_count >= MAX_OBJECTS:
             raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits); "
@@ -150,10 +160,22 @@ class Scene:
                 raise SceneError(f"'{fn.name}': colors must be a [{count}, 3] array of values in [0, 1]")
         m = np.eye(4) if transform is None else _as_matrix(transform)
         obj = SceneObject(fn, params, m, material or Material(), self.object_count + 1, count, per, transforms,
-                          colors)
+                          colors, variant, aa)
         self.objects.append(obj)
         self.touch()
         return obj
+
+    def subscene(self, objects, surfels=()) -> "Scene":
+        """A scene that draws only ``objects`` (SceneObjects of this scene) and ``surfels`` (its
+        SurfelObjects), keeping their object ids, background and time, so that frames of several
+        subscenes composite into the whole scene."""
+        ids = {id(o) for o in self.objects} | {id(o) for o in self.surfels}
+        if any(id(o) not in ids for o in (*objects, *surfels)):
+            raise SceneError("subscene: an object does not belong to the scene")
+        sub = Scene(background=self.background, time=self.time)
+        sub.objects, sub.surfels = list(objects), list(surfels)
+        sub.touch()
+        return sub
 
     def touch(self) -> None:
         """Mark the scene as changed: renderers upload its buffers again on the next frame.
@@ -162,14 +184,11 @@ class Scene:
 
     def add_surfels(self, path_or_set, transform=None, strategy=None, specular: float = 0.25) -> SurfelObject:
         """Add a ``.surfels`` file or SurfelSet; ``strategy`` picks the prefix each frame
-        (paramlod.surfels.FixedSize(2) by default, FixedCount, FrameTimeAdaptive)."""
-        from paramlod.surfels.format import load_surfels
-        from paramlod.surfels.render import FixedSize
-
+        (paramlod.surfels.FixedSize(2) when None, FixedCount, FrameTimeAdaptive)."""
         if self.object_count >= MAX_OBJECTS:
             raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits)")
         m = np.eye(4) if transform is None else _as_matrix(transform)
-        obj = SurfelObject(load_surfels(path_or_set), m, strategy or FixedSize(), self.object_count + 1, specular)
+        obj = SurfelObject(load("surfels", path_or_set), m, strategy, self.object_count + 1, specular)
         self.surfels.append(obj)
         self.touch()
         return obj

@@ -7,8 +7,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from paramlod import kernels
-
+from paramlod.device.context import gl_context
 from paramlod.errors import SurfelError
+from paramlod.pipeline.driver import render
 from paramlod.surfels.build.sources import TriangleSoup
 from paramlod.surfels.build.views import ViewSet, make_views
 
@@ -72,8 +73,6 @@ class MeshRasterizer:
     """A triangle soup uploaded once, drawn into float render targets with any view/projection."""
 
     def __init__(self, soup: TriangleSoup):
-        from paramlod.device.context import gl_context
-
         self.ctx = ctx = gl_context()
         self.program = ctx.program(vertex_shader=kernels.source("surfels/surfels_gbuffer_vert.glsl"),
                                    geometry_shader=kernels.source("surfels/surfels_gbuffer_geom.glsl"),
@@ -171,8 +170,6 @@ def scene_bounds(scene, grid: int = 33) -> np.ndarray:
 def scene_gbuffer(scene, views: int = 16, resolution: int = 512, margin: float = 1.1, name: str = "scene") -> GBuffer:
     """G-buffers of a parametric scene through paramlod.render on orthographic cameras: position
     from each pixel centre and its linear depth, the Frame's normal, the object's material colour."""
-    import paramlod
-
     if not scene.objects:
         raise SurfelError("the scene has no objects to sample")
     lo, hi = scene_bounds(scene)
@@ -194,7 +191,7 @@ def scene_gbuffer(scene, views: int = 16, resolution: int = 512, margin: float =
         albedo[oid, :3] = mats[i, :3]
         albedo[oid, 3] = 1.0
     for i in range(k):
-        frame = paramlod.render(scene, vs.camera(i))
+        frame = render(scene, vs.camera(i))
         ok = np.isfinite(frame.depth)
         p = vs.pixel_world(i, np.where(ok, frame.depth, 0.0))
         pos[i, ..., :3] = np.where(ok[..., None], p, 0.0)

@@ -1,11 +1,12 @@
-"""numpy twins of kernels/surfels_sample.cl (bit-identical on small G-buffers: the tests compare
+"""numpy twins of kernels/surfels/surfels_sample.cl (bit-identical on small G-buffers: the tests compare
 every pass and whole sampling runs), and of the sampler's round loop."""
 from __future__ import annotations
 
 import numpy as np
 
-ALL_ONES = np.uint64(0xFFFFFFFFFFFFFFFF)
-HI = np.uint64(0xFFFFFFFF00000000)
+from paramlod.core.color import linear_to_srgb8_f64
+from paramlod.surfels.build.schedule import (ALL_ONES, HI, f32_bits, handover_r2, key_pixel, key_r2, level_strides,
+                                             remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
 
 
 def dist2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -14,19 +15,6 @@ def dist2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     b = np.asarray(b, np.float32)
     d = a[..., :3] - b[..., :3]
     return (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
-
-
-def f32_bits(x) -> np.ndarray:
-    return np.asarray(x, np.float32).view(np.uint32).astype(np.uint64)
-
-
-def key_r2(key) -> np.ndarray:
-    """The float32 squared radius in a key's high half."""
-    return (np.asarray(key, np.uint64) >> np.uint64(32)).astype(np.uint32).view(np.float32)
-
-
-def key_pixel(key) -> np.ndarray:
-    return (np.asarray(key, np.uint64) & np.uint64(0xFFFFFFFF)).astype(np.int64)
 
 
 def voronoi_splat(vor, pos, samples, first, count, r2):
@@ -90,8 +78,6 @@ def seed_pixel(pos, seed):
 
 def loop(pos, samples, vor, n, target, stop_r2=0.0, fix_first_radius=False, threshold=0.75):
     """Rounds as Sampler.loop: (keys, last r2max); ``samples`` has room for ``target`` keys."""
-    from paramlod.surfels.build.sampler import splat_r2, threshold_r2
-
     first = fix_first_radius
     while True:
         cand, _ = farthest(vor, pos, n)
@@ -124,8 +110,6 @@ def sample(pos, target, seed_pixel, threshold=0.75):
 
 def run_levels(gbuf, target, seed=0, threshold=0.75):
     """The coarse-to-fine loop of sampler.run_levels, in numpy."""
-    from paramlod.surfels.build.sampler import handover_r2, level_strides, remap_keys, resume_radii, stop_r2
-
     strides = level_strides(gbuf.views.resolution)
     pixel = gbuf.views.pixel_size
     keys = r2max = prev = None
@@ -156,7 +140,7 @@ def run_levels(gbuf, target, seed=0, threshold=0.75):
     return keys
 
 
-# --- prefix renderer (kernels/surfels_splat.cl) ----------------------------------------------------
+# --- prefix renderer (kernels/surfels/surfels_splat.cl) ----------------------------------------------------
 def _f(x):
     return np.float32(x)
 
@@ -195,12 +179,6 @@ def _oct10(n):
     return (u[..., 0] << np.uint64(10)) | u[..., 1]
 
 
-def _srgb8(x):
-    x = np.clip(x, 0.0, 1.0)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return (s * 255.0 + 0.5).astype(np.uint64)
-
-
 def view_dir(cam, e):
     """float64 twin of common.cl view_dir(): towards the viewer, (0, 0, 1) for orthographic."""
     e = np.asarray(e, np.float64)
@@ -222,7 +200,7 @@ def shade(n_view, ev, mat, light):
     hv /= np.linalg.norm(hv, axis=-1, keepdims=True)
     spec = mat[3] * np.power(np.maximum(_dot(n, hv), 0.0), 48.0)
     rgb = np.asarray(mat[:3], np.float64) * (amb + (1 - amb) * diff)[..., None] + spec[..., None]
-    c = _srgb8(rgb)
+    c = linear_to_srgb8_f64(rgb).astype(np.uint64)
     return (c[..., 0] << np.uint64(24)) | (c[..., 1] << np.uint64(16)) | (c[..., 2] << np.uint64(8)) | np.uint64(255), n
 
 

@@ -1,4 +1,4 @@
-"""Progressive farthest-point sampling of G-buffers in OpenCL (kernels/surfels_sample.cl).
+"""Progressive farthest-point sampling of G-buffers in OpenCL (kernels/surfels/surfels_sample.cl).
 
 Per round: (1) the sites inserted last round splat their distance discs into the Voronoi buffer
 (64-bit atom_min of d^2 bits << 32 | site); (2) each cell's farthest pixel becomes its site's
@@ -19,76 +19,25 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from paramlod.app.scenefile import load_scene
+from paramlod.core.color import linear_rgba_to_srgb8_f64
 from paramlod.device.context import cl_device
 from paramlod.device.programs import build
-
 from paramlod.errors import SurfelError
+from paramlod.scene.scene import Scene
+from paramlod.surfels.build.gbuffer import GBuffer, mesh_gbuffer, scene_gbuffer
+from paramlod.surfels.build.schedule import (HI, THRESHOLD, handover_r2, key_pixel, key_r2, level_strides,
+                                             remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
+from paramlod.surfels.build.sources import TriangleSoup, load_mesh, soup_from_trimesh
 from paramlod.surfels.format import SurfelSet
-from paramlod.surfels.build.gbuffer import GBuffer
-from paramlod.surfels.build.reference import HI, key_pixel, key_r2
 
 LOCAL = 64                  # work-group size of every sampling kernel (one compiled variant on PoCL)
-TILE = 16                   # must match kernels/surfels_sample.cl
-THRESHOLD = 0.75            # candidates under this fraction of the largest radius wait
-SPLAT_SLACK = 1.001         # Voronoi discs are splatted with this much more than the covering radius^2
+TILE = 16                   # must match kernels/surfels/surfels_sample.cl
 MAX_SURFELS = 1 << 26
-
-
-def threshold_r2(r2max, fraction=THRESHOLD) -> np.float32:
-    return np.float32(r2max) * np.float32(fraction * fraction)
-
-
-def splat_r2(r2max, slack=SPLAT_SLACK) -> np.float32:
-    return np.float32(r2max) * np.float32(slack)
-
-
-# Coarse-to-fine levels: while the radius is large, rounds run on G-buffers point-subsampled by a
-# stride (every stride-th pixel of every stride-th row), which costs 1/stride^2 of a full round and
-# samples just as evenly while the radius spans many of their pixels.
-MAX_STRIDE = 8
-MIN_LEVEL_RESOLUTION = 32   # a level has at least this many pixels per side
-SWITCH_PIXELS = 8.0         # a level hands over when the largest radius drops under this many of its pixels
-
-
-def level_strides(resolution: int) -> list[int]:
-    """Strides from coarse to fine, ending with 1."""
-    out = [s for s in (8, 4, 2) if s <= MAX_STRIDE and resolution % s == 0 and resolution // s >= MIN_LEVEL_RESOLUTION]
-    return out + [1]
-
-
-def stop_r2(stride: int, pixel_size: float) -> np.float32:
-    return np.float32((SWITCH_PIXELS * stride * pixel_size) ** 2)
-
-
-def resume_radii(r2, tries: int = 8):
-    """Squared splat radii for handing samples to a finer level: r2, 4 r2, 16 r2, ..., then all."""
-    r2 = np.float32(r2)
-    for _ in range(tries):
-        yield r2
-        r2 = np.float32(r2 * np.float32(4.0))
-    yield np.float32(np.inf)
-
-
-def handover_r2(r2max, coarse_stride: int, pixel_size: float) -> np.float32:
-    """First splat radius^2 at the finer level: the coarse covering radius plus two coarse pixels."""
-    return np.float32((float(np.sqrt(np.float32(r2max))) + 2.0 * coarse_stride * pixel_size) ** 2)
-
-
-def remap_keys(keys: np.ndarray, shape, stride_from: int, stride_to: int) -> np.ndarray:
-    """Sample keys of a level with ``stride_from`` as keys of the level with ``stride_to``
-    (``shape`` = (K, H, W) of the full-resolution G-buffer)."""
-    k, h, w = shape
-    hf, wf = h // stride_from, w // stride_from
-    ht, wt = h // stride_to, w // stride_to
-    f = stride_from // stride_to
-    q = key_pixel(keys)
-    layer, rest = np.divmod(q, hf * wf)
-    y, x = np.divmod(rest, wf)
-    q2 = (layer * ht + y * f) * wt + x * f
-    return (np.asarray(keys, np.uint64) & HI) | q2.astype(np.uint64)
 
 
 def tile_bounds(position: np.ndarray):
@@ -307,15 +256,6 @@ class Sampler:
         self.start()
         return self.loop(0.0, True, progress)[0]
 
-def _linear_to_srgb8(rgba: np.ndarray) -> np.ndarray:
-    c = np.clip(rgba[..., :3].astype(np.float64), 0, 1)
-    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
-    out = np.empty(rgba.shape[:-1] + (4,), np.uint8)
-    out[..., :3] = (s * 255 + 0.5).astype(np.uint8)
-    out[..., 3] = (np.clip(rgba[..., 3], 0, 1) * 255 + 0.5).astype(np.uint8)
-    return out
-
-
 def _round_up(n, m):
     return max(m, (n + m - 1) // m * m)
 
@@ -405,15 +345,12 @@ def surfel_set(gbuf: GBuffer, keys: np.ndarray, meta: dict | None = None) -> Sur
     vs = gbuf.views
     info = {"source": gbuf.source, "views": vs.count, "resolution": vs.resolution, "pixel_size": vs.pixel_size}
     info.update(meta or {})
-    return SurfelSet.build(pos, nrm, _linear_to_srgb8(col), radii, info)
+    return SurfelSet.build(pos, nrm, linear_rgba_to_srgb8_f64(col), radii, info)
 
 
 def sample_mesh(mesh, n: int, views: int = 16, resolution: int = 512, seed: int = 0,
                 progress: bool = False) -> SurfelSet:
     """Blue surfels of a mesh: a file path, a ``trimesh.Trimesh`` or a TriangleSoup."""
-    from paramlod.surfels.build.gbuffer import mesh_gbuffer
-    from paramlod.surfels.build.sources import TriangleSoup, load_mesh, soup_from_trimesh
-
     _check_count(n)
     if isinstance(mesh, TriangleSoup):
         soup = mesh
@@ -427,8 +364,6 @@ def sample_mesh(mesh, n: int, views: int = 16, resolution: int = 512, seed: int 
 def sample_scene(scene, n: int, views: int = 16, resolution: int = 512, seed: int = 0,
                  progress: bool = False, name: str = "scene") -> SurfelSet:
     """Blue surfels of a parametric paramlod.Scene (G-buffers from the point renderer)."""
-    from paramlod.surfels.build.gbuffer import scene_gbuffer
-
     _check_count(n)
     return sample_gbuffer(scene_gbuffer(scene, views, resolution, name=name), n, seed, progress)
 
@@ -436,17 +371,9 @@ def sample_scene(scene, n: int, views: int = 16, resolution: int = 512, seed: in
 def sample(source, n: int, views: int = 16, resolution: int = 512, seed: int = 0,
            progress: bool = False) -> SurfelSet:
     """Blue surfels of a mesh file, a scene file (.toml), a trimesh mesh or a paramlod.Scene."""
-    from pathlib import Path
-
-    from paramlod.scene.scene import Scene
-
     if isinstance(source, Scene):
         return sample_scene(source, n, views, resolution, seed, progress)
     if isinstance(source, (str, Path)) and Path(source).suffix.lower() == ".toml":
-        from paramlod.app.scenefile import load_scene
-
         _check_count(n)
-        sf = load_scene(source)
-        scene = sf.scene if hasattr(sf, "scene") else sf[0]
-        return sample_scene(scene, n, views, resolution, seed, progress, name=Path(source).name)
+        return sample_scene(load_scene(source).scene, n, views, resolution, seed, progress, name=Path(source).name)
     return sample_mesh(source, n, views, resolution, seed, progress)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from paramlod.core.color import srgb_to_linear
 from paramlod.errors import SurfelError
 
 MESH_TYPES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
@@ -15,11 +16,6 @@ DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
 # a corner whose smooth (vertex) normal is further than this from its face normal is a hard edge:
 # it takes the face normal (STL and CAD meshes have merged vertices along sharp edges)
 HARD_EDGE_COS = np.cos(np.radians(60.0))
-
-
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    c = np.asarray(c, np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
 @dataclass

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from paramlod.core.camera import Camera
-
 from paramlod.errors import SurfelError
 
 MAX_VIEWS = 32

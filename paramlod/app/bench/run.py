@@ -12,19 +12,36 @@ Results go to DIR/results.json (written after every measurement), DIR/results.md
 """
 from __future__ import annotations
 
+import importlib.resources
 import json
+import os
 import platform
 import statistics
 import time
 from pathlib import Path
 
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 
+from paramlod.app.args import add_size
 from paramlod.app.bench.scenes import DEFAULT, SCENARIOS
 from paramlod.core.camera import Camera
+from paramlod.core.files import write_atomically
 from paramlod.device.context import cl_device
+from paramlod.device.programs import start_timing, stop_timing
 from paramlod.errors import ParamlodError
-from paramlod.core.frame import write_atomically
+from paramlod.function.programs import kernel
+from paramlod.function.registry import all_functions
+from paramlod.functions.sh_glyph import make_sh_glyph
+from paramlod.lod.stage import LodSettings
+from paramlod.pipeline.driver import render, render_on_device, scene_state
+from paramlod.pipeline.settings import RenderSettings
+from paramlod.renderers.tess import TessSettings
+from paramlod.scene.framing import framing_camera, scene_box
+from paramlod.scene.scene import Scene
+from paramlod.surfels.build import sample_mesh
+from paramlod.surfels.render import FixedCount, default_camera, render_surfels
 
 # name -> (render variant, AA mode); points-4xSS is the direct variant drawn into 2x2 supersampled
 # key buffers, points-ssaa the thesis's local-framebuffer 4xSS
@@ -38,7 +55,7 @@ def add_arguments(p):
                                                 f"{' '.join(SCENARIOS)})")
     p.add_argument("--variants", nargs="+", default=DEFAULT_VARIANTS, choices=list(VARIANTS),
                    help="render variants (default: all five)")
-    p.add_argument("--size", default="1920x1080", help="frame size (default 1920x1080)")
+    add_size(p, "1920x1080", what="frame size")
     p.add_argument("--distances", type=float, nargs="+", default=[0.35, 0.6, 1.0, 2.0],
                    help="camera distances as multiples of the framing distance (default 0.35 0.6 1 2)")
     p.add_argument("--frames", type=int, default=8, help="timed frames per orbit (default 8)")
@@ -51,10 +68,6 @@ def add_arguments(p):
 # --- ceilings ------------------------------------------------------------------------------------
 def atomics_ceiling(width, height, repeats=5) -> float:
     """Random 64-bit atom_min per second into a width x height buffer."""
-    import pyopencl as cl
-
-    from paramlod.function.programs import kernel
-
     k = kernel("random_atom_min", ["bench/bench.cl"])
     dev = cl_device()
     n = width * height
@@ -73,11 +86,6 @@ def atomics_ceiling(width, height, repeats=5) -> float:
 
 def tess_ceiling(size, level=64, repeats=3) -> dict:
     """Triangles/s of hardware tessellation of a trivial function (a sphere) at a fixed level."""
-    from paramlod.lod.stage import LodSettings
-    from paramlod.pipeline.driver import RenderSettings, render
-    from paramlod.scene.scene import Scene
-    from paramlod.renderers.tess import TessSettings
-
     s = Scene()
     s.add("sphere")
     cam = Camera.look_at((0, 0, 3.2), (0, 0, 0), size=size)
@@ -113,21 +121,19 @@ def _frame_ms(ms: dict) -> float:
 def _rss_mib() -> float:
     try:
         with open("/proc/self/statm") as f:
-            import os
-
             return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
     except OSError:
         return float("nan")
 
 
 def _device_buffers_mib(scene, size, ss: int = 1) -> float:
-    from paramlod.pipeline.driver import renderer_for
-
-    r = renderer_for(scene)
     total = 0
-    if r.lod is not None:
-        total += sum(b.capacity * b.dtype.itemsize for b in (*r.lod.bufs, r.lod.render))
-        total += r.points.order_capacity * 8   # the point renderer's schedule
+    for r in scene_state(scene).renderer_states():
+        lod, points = getattr(r, "lod", None), getattr(r, "points", None)
+        if lod is not None:
+            total += sum(b.capacity * b.dtype.itemsize for b in (*lod.bufs, lod.render))
+        if points is not None:
+            total += points.order_capacity * 8   # the point renderer's schedule
     w, h = size
     total += w * h * (16 + 40)   # key buffers + resolved outputs
     total += w * h * ss * ss * 16 if ss > 1 else 0   # supersampled key buffers (points-4xSS)
@@ -135,9 +141,6 @@ def _device_buffers_mib(scene, size, ss: int = 1) -> float:
 
 
 def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size):
-    from paramlod.device.programs import start_timing, stop_timing
-    from paramlod.pipeline.driver import RenderSettings, render, renderer_for
-
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
     rs.tess.l_max = l_max
@@ -148,24 +151,31 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
     # interactive viewer does (a frame's 80 MB read-back at 1080p is no part of a viewer's frame,
     # and the next frame's Python measured slower after it); one more frame, read back, gives
     # the pixel statistics and the read-back time
-    on_device = None if variant == "tess" else renderer_for(scene).render_on_device
+    on_device = variant != "tess"
     rows = []
     for k in range(args.warmup + args.frames):
         cam = _orbit(base, centre, dist, k, args.frames, size)
         start_timing()
-        stats = on_device(scene, cam, rs, variant) if on_device else render(scene, cam, variant, rs).stats
+        stats = render_on_device(scene, cam, variant, rs) if on_device else render(scene, cam, variant, rs).stats
         kernel_ms = stop_timing()
         if k >= args.warmup:
             rows.append((stats, kernel_ms))
     st = [r[0] for r in rows]
-    pixels = render(scene, cam, variant, rs).stats if on_device else None
+    pixels = None
+    if on_device:   # the frame's image read back, then the rest of its arrays
+        extra = render(scene, cam, variant, rs)
+        t0 = time.perf_counter()
+        extra.rgb8()
+        t1 = time.perf_counter()
+        extra.materialize()
+        pixels = dict(extra.stats, image_readback_ms=(t1 - t0) * 1e3, readback_ms=(time.perf_counter() - t0) * 1e3)
     frame = [_frame_ms(s["ms"]) for s in st]
     med = statistics.median
     out = {
         "distance": dist, "frames": len(rows),
         "frame_ms": med(frame), "frame_ms_p95": float(np.percentile(frame, 95)),
         "lod_ms": med(s["ms"].get("lod", 0.0) for s in st),
-        "render_ms": med(s["ms"].get("render", s["ms"].get("draw", 0.0)) for s in st),
+        "render_ms": med(s["ms"]["render"] for s in st),
         "cl_kernel_ms": med(r[1] for r in rows),
         "render_patches": med(s.get("render_patches", 0) for s in st),
         "lod_steps_in": [med(s["lod_steps"][i]["in"] for s in st) for i in range(len(st[0].get("lod_steps", [])))],
@@ -188,7 +198,7 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         out["host_ms"] = med(s["ms"]["host"] for s in st)
         # pixel statistics and read-back time of the extra frame read back
         out.update(pixels_written=pixels["pixels_written"], overdraw=pixels["overdraw"],
-                   readback_ms=pixels["ms"]["readback"])
+                   readback_ms=pixels["readback_ms"], image_readback_ms=pixels["image_readback_ms"])
         out["idle_ms"] = max(0.0, out["frame_ms"] - out["cl_kernel_ms"])
     out["fps"] = 1e3 / out["frame_ms"] if out["frame_ms"] > 0 else float("inf")
     return out
@@ -197,13 +207,6 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
 # --- function throughput and surfels ---------------------------------------------------------------
 def function_throughput(nu=2048, nv=1024) -> list[dict]:
     """OpenCL evaluation (positions) of every built-in, and of SH glyphs of each order."""
-    import pyopencl.array as cla
-
-    from paramlod.functions.sh_glyph import make_sh_glyph
-
-    from paramlod.function.programs import kernel
-    from paramlod.function.registry import all_functions
-
     q = cl_device().queue
     out_buf = cla.empty(q, nu * nv, np.float32)
     fns = dict(all_functions())
@@ -227,11 +230,7 @@ def function_throughput(nu=2048, nv=1024) -> list[dict]:
 
 
 def surfel_costs(size) -> dict:
-    from paramlod.surfels import FixedCount, render_surfels, sample_mesh
-
     try:
-        import importlib.resources
-
         mesh = str(importlib.resources.files("pymeshfix").joinpath("examples/StanfordBunny.ply"))
         name = "Stanford bunny (pymeshfix)"
     except ModuleNotFoundError:
@@ -245,8 +244,6 @@ def surfel_costs(size) -> dict:
         s = sample_mesh(mesh, n)
         out["sampling"].append({"n": n, "got": len(s), "seconds": time.perf_counter() - t0})
         big = s
-    from paramlod.surfels import default_camera
-
     cam = default_camera(big, size)
     for n in (1_000, 3_000, 10_000, 30_000, 100_000):
         if n > len(big):
@@ -263,10 +260,7 @@ def surfel_costs(size) -> dict:
 
 # --- driver -----------------------------------------------------------------------------------------
 def run_bench(args) -> int:
-    from paramlod.app.cli import _size
-    from paramlod.scene.framing import framing_camera, scene_box
-
-    size = _size(args.size)
+    size = args.size
     names = args.scenarios or DEFAULT
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:

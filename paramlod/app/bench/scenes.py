@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from paramlod.scene.scene import Material, Scene
 from paramlod.core.transforms import translate
+from paramlod.dmri.sh import coefficient_count
+from paramlod.functions.fiber import fiber_curtain as build_fiber_curtain
+from paramlod.functions.sh_glyph import default_coefficients, make_sh_glyph
+from paramlod.functions.yarn import yarn_curtain as build_yarn_curtain
+from paramlod.scene.scene import Material, Scene
 
 
 def _glyph_coeffs(order: int, count: int, seed: int = 0) -> np.ndarray:
     """Deterministic star-shaped glyphs: the library's default glyph plus band-limited noise."""
-    from paramlod.functions.sh_glyph import coefficient_count, default_coefficients
-
     k = coefficient_count(order)
     rng = np.random.default_rng(seed)
     base = np.asarray(default_coefficients(order))
@@ -34,8 +36,6 @@ def torus():
 
 
 def sh_glyph(order: int):
-    from paramlod.functions.sh_glyph import make_sh_glyph
-
     s = Scene()
     s.add(make_sh_glyph(order), params={"coeffs": _glyph_coeffs(order, 1)[0]}, material=Material((0.85, 0.55, 0.3)))
     return s
@@ -43,8 +43,6 @@ def sh_glyph(order: int):
 
 def hardi(order: int, nx: int = 140, ny: int = 140):
     """A 140 x 140 = 19,600-glyph field (synthetic coefficients, the thesis's dataset size)."""
-    from paramlod.functions.sh_glyph import make_sh_glyph
-
     n = nx * ny
     j, i = np.divmod(np.arange(n), nx)
     tr = np.repeat(np.eye(4)[None], n, axis=0)
@@ -58,9 +56,7 @@ def hardi(order: int, nx: int = 140, ny: int = 140):
 
 
 def yarn_curtain():
-    from paramlod.functions.yarn import yarn_curtain as build
-
-    r = build()
+    r = build_yarn_curtain()
     s = Scene()
     s.add_instances("yarn", r["count"], params=r["params"], transforms=r["transforms"],
                     material=Material((0.15, 0.3, 0.75)))
@@ -68,9 +64,7 @@ def yarn_curtain():
 
 
 def fiber_curtain():
-    from paramlod.functions.fiber import fiber_curtain as build
-
-    r = build()
+    r = build_fiber_curtain()
     s = Scene()
     s.add_instances("fiber", r["count"], params=r.get("params"), per_instance=r.get("per_instance"),
                     transforms=r["transforms"], material=Material((0.75, 0.25, 0.2)))

@@ -4,8 +4,7 @@ Domain: u in [0, 1] up the post, v in [0, 2 pi) around. Parameters: ``t`` (time)
 """
 from sympy import cos, pi, sin
 
-from paramlod import parametric, translate
-from paramlod.function.define import Part
+from paramlod import Part, parametric, translate
 
 
 @parametric(u=(0, 1), v=(0, 2 * pi), params={"lean": 0.3}, parts=[

@@ -1,0 +1,73 @@
+"""State by lifetime. Per scene (``SceneState``): the plan, each group's subscene and renderer
+state (compiled programs, uploads, LOD buffers), kept while the scene lives and reused across its
+versions when a group draws the same functions. Per view: the key buffers of each (size,
+subsamples) and their downsamples. Per frame: FrameStats (built by the driver)."""
+from __future__ import annotations
+
+from paramlod.errors import SceneError
+from paramlod.pipeline.plan import plan
+from paramlod.renderers.targets import Downsample, KeyBuffer
+
+MAX_SIDE = 16384   # subsamples per side of a supersampled key buffer
+
+
+class SceneState:
+    def __init__(self):
+        self._plan_key = None
+        self.passes = []
+        self.subscenes: dict = {}      # Group -> its subscene
+        self._renderers: dict = {}     # (variant, functions) -> renderer state
+        self._keys: dict = {}          # (w, h, ss) -> KeyBuffer
+        self._downsample: dict = {}    # ss -> Downsample
+
+    def update(self, scene, variant, settings):
+        """Plan the scene again when it, the frame's variant or the default AA changed."""
+        key = (scene._version, variant, settings.points.supersample, settings.tess.aa)
+        if key != self._plan_key:
+            self.passes = plan(scene, variant, settings)
+            self.subscenes = {g: scene.subscene(*((g.objects, ()) if g.spec.kind != "surfels" else ((), g.objects)))
+                              for p in self.passes for g in p.groups}
+            self._plan_key = key
+        for sub in self.subscenes.values():
+            sub.time = scene.time
+        return self.passes
+
+    def renderer(self, group, record: bool = False):
+        """The renderer state that draws ``group`` (made on first use)."""
+        functions = tuple(self.subscenes[group].functions())
+        key = (group.spec.variant, functions, record)
+        state = self._renderers.get(key)
+        if state is None:
+            state = self._renderers[key] = group.spec.factory(list(functions), record=record)
+        return state
+
+    def renderer_states(self) -> list:
+        """The renderer states made so far (for memory figures)."""
+        return list(self._renderers.values())
+
+    def keys(self, size, ss: int = 1) -> KeyBuffer:
+        """The frame-sized key buffers of a pass with ``ss`` subsamples per pixel side."""
+        return self._buffer(size[0], size[1], ss)
+
+    def subsample_keys(self, size, ss: int) -> KeyBuffer:
+        """The key buffers ``ss`` times the frame's size that a supersampled pass draws into."""
+        w, h = size[0] * ss, size[1] * ss
+        if max(w, h) > MAX_SIDE:
+            raise SceneError(f"points supersample {ss} at {size[0]}x{size[1]} needs {w}x{h} subsamples, more "
+                             f"than {MAX_SIDE} a side; use a smaller factor or frame")
+        return self._buffer(w, h, 0)
+
+    def downsample(self, ss: int) -> Downsample:
+        if ss not in self._downsample:
+            self._downsample[ss] = Downsample(ss)
+        return self._downsample[ss]
+
+    def _buffer(self, w, h, ss) -> KeyBuffer:
+        key = (w, h, ss)
+        buf = self._keys.get(key)
+        if buf is None:
+            # free buffers of other sizes first (a resized view keeps only its own)
+            for k in [k for k in self._keys if k[2] == ss and k[:2] != (w, h)]:
+                self._keys.pop(k)
+            buf = self._keys[key] = KeyBuffer(w, h, max(ss, 1))
+        return buf

@@ -1,0 +1,86 @@
+"""The plan of a frame: a scene's objects grouped by (kind, variant, AA mode), each group drawn
+by its registered renderer, and the groups placed in passes (targets), coarsest first.
+
+A "keys" pass is one set of 64-bit key buffers (``ss`` x ``ss`` subsamples per pixel) that every
+key renderer of the pass draws into; a "gl" pass is one renderer's own OpenGL targets. Surfels
+join the pass of the direct point variant (else one of ``settings.points.supersample``)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from paramlod.errors import SceneError
+from paramlod.renderers.aa import parse_aa
+from paramlod.renderers.registry import KINDS, RendererSpec, renderer, variants
+
+
+@dataclass(frozen=True, eq=False)
+class Group:
+    spec: RendererSpec
+    aa: str | None       # the objects' own AA mode (None: the frame's settings)
+    objects: tuple       # the scene's objects this group draws, in scene order
+
+
+@dataclass
+class Pass:
+    target: str          # "keys" or "gl"
+    ss: int              # subsamples per pixel side of a keys pass; 1 for gl
+    groups: list
+
+    @property
+    def samples_per_pixel(self) -> int:
+        if self.target == "gl":
+            g = self.groups[0]
+            return parse_aa(g.aa or "noAA").samples_per_pixel if g.aa else 0   # 0: from its settings
+        return self.ss * self.ss
+
+
+def check_variant(variant) -> None:
+    if variant is not None:
+        renderer(variant)   # a SceneError naming the registered variants
+
+
+def plan(scene, variant, settings) -> list[Pass]:
+    """The passes that draw ``scene``; ``variant``: the frame's variant for objects without one
+    (None: each kind's default)."""
+    check_variant(variant)
+    groups: dict[tuple, list] = {}
+    for kind in KINDS.values():
+        for obj in kind.objects(scene):
+            v = getattr(obj, "variant", None) or (variant if variant in variants(kind.name) else kind.default_variant)
+            spec = renderer(v, kind.name)
+            groups.setdefault((spec.variant, getattr(obj, "aa", None)), []).append(obj)
+    if not groups:
+        raise SceneError("the scene has no objects; add one with scene.add(...) or scene.add_surfels(...)")
+    keys: dict[int, list] = {}
+    passes = []
+    surfels = []
+    for (v, aa), objs in groups.items():
+        spec = renderer(v)
+        group = Group(spec, aa, tuple(objs))
+        if spec.target == "gl":
+            passes.append(Pass("gl", 1, [group]))
+            continue
+        if spec.kind == "surfels":
+            surfels.append(group)
+            continue
+        keys.setdefault(_key_ss(group, settings), []).append(group)
+    if surfels:
+        direct = [ss for ss, gs in keys.items() if any(g.spec.variant == "points" for g in gs)]
+        keys.setdefault(direct[0] if direct else settings.points.supersample, []).extend(surfels)
+    passes += [Pass("keys", ss, gs) for ss, gs in keys.items()]
+    return sorted(passes, key=lambda p: (p.target == "gl", p.ss))
+
+
+def _key_ss(group: Group, settings) -> int:
+    if group.spec.variant == "points-ssaa":
+        if group.aa:
+            raise SceneError(f"points-ssaa takes no per-object aa ({group.aa!r}): its subsamples are "
+                             "settings.ssaa.ss ([ssaa] ss in a scene file)")
+        return 1
+    if group.aa is None:
+        return settings.points.supersample
+    aa = parse_aa(group.aa)
+    if aa.msaa > 1:
+        raise SceneError(f"anti-aliasing {group.aa!r}: the points variant supersamples only (4xSS, 9xSS, 16xSS); "
+                         "multisampling is a mode of the tess variant")
+    return aa.ss

@@ -1,0 +1,15 @@
+"""A scene's LOD stage and device buffers outside the frame driver, for tests of the stage itself."""
+from __future__ import annotations
+
+from paramlod.lod.stage import LodStage
+from paramlod.lod.uploads import SceneBuffers
+from paramlod.renderers.shading import LIGHT
+
+
+class ParametricStage:
+    def __init__(self, scene):
+        self.lod = LodStage(scene.functions())
+        self.buffers = SceneBuffers(LIGHT)
+
+    def upload(self, scene, camera) -> dict:
+        return self.buffers.upload(scene, camera)
