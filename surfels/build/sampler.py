@@ -66,18 +66,16 @@ def half_box(r2: float, scale: float) -> int:
     return int(np.ceil(np.sqrt(float(r2)) * scale)) + 3
 
 
-_sorters: dict = {}
-
-
 def _sorter():
-    """Radix sort of ulong keys by decreasing high half (the squared radius), stable."""
+    """Radix sort of ulong keys by decreasing high half (the squared radius), stable; built once
+    per CL context (kept in its cache)."""
     from pyopencl.algorithm import RadixSort
 
-    ctx = cl_device().context
-    s = _sorters.get(id(ctx))
+    dev = cl_device()
+    s = dev.cache.get("surfels.radix_sort")
     if s is None:
-        s = _sorters[id(ctx)] = RadixSort(ctx, "ulong *keys", key_expr="~(uint)(keys[i] >> 32)",
-                                          sort_arg_names=["keys"], key_dtype=np.uint32, bits_at_a_time=4)
+        s = dev.cache["surfels.radix_sort"] = RadixSort(dev.context, "ulong *keys", key_expr="~(uint)(keys[i] >> 32)",
+                                                        sort_arg_names=["keys"], key_dtype=np.uint32, bits_at_a_time=4)
     return s
 
 
