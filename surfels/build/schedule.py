@@ -1,0 +1,81 @@
+"""What the sampler (sampler.py, on the device) and its numpy twin (reference.py) share: the
+64-bit sample key (float32 squared radius << 32 | pixel index) and the round and level schedule.
+Pure numpy, so the twin runs without a device; both import it, neither imports the other."""
+from __future__ import annotations
+
+import numpy as np
+
+ALL_ONES = np.uint64(0xFFFFFFFFFFFFFFFF)
+HI = np.uint64(0xFFFFFFFF00000000)
+
+THRESHOLD = 0.75            # candidates under this fraction of the largest radius wait
+SPLAT_SLACK = 1.001         # Voronoi discs are splatted with this much more than the covering radius^2
+
+# Coarse-to-fine levels: while the radius is large, rounds run on G-buffers point-subsampled by a
+# stride (every stride-th pixel of every stride-th row), which costs 1/stride^2 of a full round and
+# samples just as evenly while the radius spans many of their pixels.
+MAX_STRIDE = 8
+MIN_LEVEL_RESOLUTION = 32   # a level has at least this many pixels per side
+SWITCH_PIXELS = 8.0         # a level hands over when the largest radius drops under this many of its pixels
+
+
+# --- keys ---------------------------------------------------------------------------------------
+def f32_bits(x) -> np.ndarray:
+    return np.asarray(x, np.float32).view(np.uint32).astype(np.uint64)
+
+
+def key_r2(key) -> np.ndarray:
+    """The float32 squared radius in a key's high half."""
+    return (np.asarray(key, np.uint64) >> np.uint64(32)).astype(np.uint32).view(np.float32)
+
+
+def key_pixel(key) -> np.ndarray:
+    return (np.asarray(key, np.uint64) & np.uint64(0xFFFFFFFF)).astype(np.int64)
+
+
+# --- rounds -------------------------------------------------------------------------------------
+def threshold_r2(r2max, fraction=THRESHOLD) -> np.float32:
+    return np.float32(r2max) * np.float32(fraction * fraction)
+
+
+def splat_r2(r2max, slack=SPLAT_SLACK) -> np.float32:
+    return np.float32(r2max) * np.float32(slack)
+
+
+# --- levels -------------------------------------------------------------------------------------
+def level_strides(resolution: int) -> list[int]:
+    """Strides from coarse to fine, ending with 1."""
+    out = [s for s in (8, 4, 2) if s <= MAX_STRIDE and resolution % s == 0 and resolution // s >= MIN_LEVEL_RESOLUTION]
+    return out + [1]
+
+
+def stop_r2(stride: int, pixel_size: float) -> np.float32:
+    return np.float32((SWITCH_PIXELS * stride * pixel_size) ** 2)
+
+
+def resume_radii(r2, tries: int = 8):
+    """Squared splat radii for handing samples to a finer level: r2, 4 r2, 16 r2, ..., then all."""
+    r2 = np.float32(r2)
+    for _ in range(tries):
+        yield r2
+        r2 = np.float32(r2 * np.float32(4.0))
+    yield np.float32(np.inf)
+
+
+def handover_r2(r2max, coarse_stride: int, pixel_size: float) -> np.float32:
+    """First splat radius^2 at the finer level: the coarse covering radius plus two coarse pixels."""
+    return np.float32((float(np.sqrt(np.float32(r2max))) + 2.0 * coarse_stride * pixel_size) ** 2)
+
+
+def remap_keys(keys: np.ndarray, shape, stride_from: int, stride_to: int) -> np.ndarray:
+    """Sample keys of a level with ``stride_from`` as keys of the level with ``stride_to``
+    (``shape`` = (K, H, W) of the full-resolution G-buffer)."""
+    k, h, w = shape
+    hf, wf = h // stride_from, w // stride_from
+    ht, wt = h // stride_to, w // stride_to
+    f = stride_from // stride_to
+    q = key_pixel(keys)
+    layer, rest = np.divmod(q, hf * wf)
+    y, x = np.divmod(rest, wf)
+    q2 = (layer * ht + y * f) * wt + x * f
+    return (np.asarray(keys, np.uint64) & HI) | q2.astype(np.uint64)
