@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
 import pyopencl as cl
 
 from paramlod import kernels
@@ -111,3 +112,16 @@ def kernel(name: str, files: list[str], defines: dict | None = None, options: tu
     if k is None:
         k = kernels_[key] = TimedKernel(cl.Kernel(prog, name))
     return k
+
+
+def set_uniform(prog, name: str, value) -> None:
+    """Set a uniform of a moderngl program if the compiler kept it (unused ones are optimized
+    away); numpy arrays are written as float32 bytes."""
+    try:
+        u = prog[name]
+    except KeyError:
+        return
+    if isinstance(value, np.ndarray):
+        u.write(np.ascontiguousarray(value, np.float32).tobytes())
+    else:
+        u.value = value

@@ -10,7 +10,7 @@ import numpy as np
 
 from paramlod import kernels
 from paramlod.device.context import gl_context
-from paramlod.device.programs import GLSL_LINE, context_lines
+from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import FunctionError
 from paramlod.function.codegen_glsl import glsl_dispatch_source
 from paramlod.function.registry import get_function
@@ -29,16 +29,6 @@ def _glsl_source(body: list[str], defines: dict | None = None) -> str:
     return head + "\n".join([kernels.source("tess/tess_common.glsl"), *body])
 
 
-def _set_uniform(prog, name: str, value) -> None:
-    """Set a uniform if the compiler kept it (unused uniforms are optimized away)."""
-    try:
-        u = prog[name]
-    except KeyError:
-        return
-    if isinstance(value, np.ndarray):
-        u.write(np.ascontiguousarray(value, np.float32).tobytes())
-    else:
-        u.value = value
 
 
 def _framebuffer(ctx):
@@ -89,8 +79,8 @@ def glsl_surface(fn, u, v, block=None, **params):
     pbuf = ctx.buffer(block.tobytes())
     try:
         pbuf.bind_to_storage_buffer(0)
-        _set_uniform(prog, "u_func", 0)
-        _set_uniform(prog, "u_param_offset", 0)
+        set_uniform(prog, "u_func", 0)
+        set_uniform(prog, "u_param_offset", 0)
         vao = ctx.vertex_array(prog, [(vbo, "2f", "in_uv")])
         _framebuffer(ctx).use()
         vao.transform(out, mode=moderngl.POINTS, vertices=n)

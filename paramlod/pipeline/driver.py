@@ -18,7 +18,6 @@ from paramlod.pipeline.composite import composite
 from paramlod.pipeline.passes import SceneState
 from paramlod.pipeline.plan import check_variant
 from paramlod.pipeline.settings import RenderSettings
-from paramlod.renderers.registry import variants
 from paramlod.scene.scene import Scene
 
 
@@ -184,4 +183,4 @@ def scene_state(scene: Scene) -> SceneState:
     return PIPELINE.state(scene)
 
 
-__all__ = ["Pipeline", "PIPELINE", "render", "render_on_device", "scene_state", "variants"]
+__all__ = ["Pipeline", "PIPELINE", "render", "render_on_device", "scene_state"]

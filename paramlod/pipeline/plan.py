@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from paramlod.errors import SceneError
-from paramlod.renderers.aa import parse_aa
+from paramlod.renderers.aa import supersampling_only
 from paramlod.renderers.registry import KINDS, RendererSpec, renderer, variants
 
 
@@ -26,13 +26,6 @@ class Pass:
     ss: int              # subsamples per pixel side of a keys pass; 1 for gl
     groups: list
 
-    @property
-    def samples_per_pixel(self) -> int:
-        if self.target == "gl":
-            g = self.groups[0]
-            return parse_aa(g.aa or "noAA").samples_per_pixel if g.aa else 0   # 0: from its settings
-        return self.ss * self.ss
-
 
 def check_variant(variant) -> None:
     if variant is not None:
@@ -41,16 +34,13 @@ def check_variant(variant) -> None:
 
 def plan(scene, variant, settings) -> list[Pass]:
     """The passes that draw ``scene``; ``variant``: the frame's variant for objects without one
-    (None: each kind's default)."""
-    check_variant(variant)
+    (None: each kind's default; the driver has checked it)."""
     groups: dict[tuple, list] = {}
     for kind in KINDS.values():
         for obj in kind.objects(scene):
             v = getattr(obj, "variant", None) or (variant if variant in variants(kind.name) else kind.default_variant)
             spec = renderer(v, kind.name)
             groups.setdefault((spec.variant, getattr(obj, "aa", None)), []).append(obj)
-    if not groups:
-        raise SceneError("the scene has no objects; add one with scene.add(...) or scene.add_surfels(...)")
     keys: dict[int, list] = {}
     passes = []
     surfels = []
@@ -77,10 +67,4 @@ def _key_ss(group: Group, settings) -> int:
             raise SceneError(f"points-ssaa takes no per-object aa ({group.aa!r}): its subsamples are "
                              "settings.ssaa.ss ([ssaa] ss in a scene file)")
         return 1
-    if group.aa is None:
-        return settings.points.supersample
-    aa = parse_aa(group.aa)
-    if aa.msaa > 1:
-        raise SceneError(f"anti-aliasing {group.aa!r}: the points variant supersamples only (4xSS, 9xSS, 16xSS); "
-                         "multisampling is a mode of the tess variant")
-    return aa.ss
+    return settings.points.supersample if group.aa is None else supersampling_only(group.aa)

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from paramlod.errors import SceneError
 from paramlod.lod.stage import LodSettings
-from paramlod.renderers.aa import parse_aa
+from paramlod.renderers.aa import parse_aa, supersampling_only
 from paramlod.renderers.registry import settings_factory
 
 
@@ -23,13 +22,8 @@ class RenderSettings:
         variant alone, so multisampling is an error. Returns the parsed AAMode."""
         self.tess.aa = mode
         self.tess.validate()
+        if points_only:
+            supersampling_only(mode)
         aa = parse_aa(mode)
-        if points_only and aa.msaa > 1:
-            raise SceneError(f"anti-aliasing {mode!r}: the points variant supersamples only (4xSS, 9xSS, "
-                             f"16xSS); multisampling is a mode of the tess variant")
         self.points.supersample = aa.ss
         return aa
-
-    def of(self, spec):
-        """The settings of renderer ``spec`` (a RendererSpec)."""
-        return getattr(self, spec.settings)

@@ -94,3 +94,13 @@ def cap_samples(requested: int, max_samples: int) -> int:
     while n > 1 and n > max_samples:
         n //= 2
     return max(n, 1)
+
+
+def supersampling_only(mode) -> int:
+    """The supersampling factor of ``mode`` for a renderer that cannot multisample (the points
+    variant); a SceneError names the mode if it multisamples."""
+    aa = parse_aa(mode)
+    if aa.msaa > 1:
+        raise SceneError(f"anti-aliasing {mode!r}: the points variant supersamples only (4xSS, 9xSS, "
+                         f"16xSS); multisampling is a mode of the tess variant")
+    return aa.ss

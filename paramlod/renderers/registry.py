@@ -73,10 +73,3 @@ def renderer(variant: str, kind: str | None = None) -> RendererSpec:
 def settings_factory(variant: str):
     """A default_factory for the settings of ``variant``'s renderer (RenderSettings' fields)."""
     return lambda: renderer(variant).settings_type()
-
-
-def kind(name: str) -> ObjectKind:
-    k = KINDS.get(name)
-    if k is None:
-        raise SceneError(f"unknown object kind {name!r} (registered: {', '.join(KINDS) or 'none'})")
-    return k

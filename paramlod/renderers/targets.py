@@ -112,10 +112,6 @@ class KeyBuffer:
         self._frame = weakref.ref(frame)
         return frame
 
-    def read_frame(self) -> Frame:
-        """Copy every resolved array to the host as a Frame (after resolve_on_device())."""
-        return self.frame().materialize()
-
 
 class _ResolvedArrays:
     """Reads one resolved array of a KeyBuffer on request (a Frame's device source)."""

@@ -31,7 +31,7 @@ from paramlod import kernels
 from paramlod.core.camera import Camera
 from paramlod.core.frame import Frame
 from paramlod.device.context import cl_device, gl_cache, gl_context
-from paramlod.device.programs import GLSL_LINE, context_lines
+from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import DeviceError, FunctionError, SceneError
 from paramlod.function.codegen_glsl import glsl_dispatch_source
 from paramlod.lod.patches import RENDER_DTYPE
@@ -152,16 +152,6 @@ _DRAW_MASK = ((True,) * 4,) * 4                        # colour, depth, normal, 
 _CLEAR_MASK = ((True,) * 4,) + ((False,) * 4,) * 3
 
 
-def _set(prog, name, value):
-    """Set a uniform if the compiler kept it (unused uniforms are optimized away)."""
-    try:
-        u = prog[name]
-    except KeyError:
-        return
-    if isinstance(value, np.ndarray):
-        u.write(np.ascontiguousarray(value, np.float32).tobytes())
-    else:
-        u.value = value
 
 
 def _mat(m) -> np.ndarray:
@@ -357,20 +347,20 @@ class TessRenderer:
         self._counters.write(np.zeros(4, np.uint32).tobytes())
         t2 = time.perf_counter()
 
-        _set(prog, "u_view", _mat(camera.view))
-        _set(prog, "u_proj", _mat(camera.projection))
-        _set(prog, "u_screen", (float(w), float(h)))
-        _set(prog, "u_threshold", (tu, tv))
+        set_uniform(prog, "u_view", _mat(camera.view))
+        set_uniform(prog, "u_proj", _mat(camera.projection))
+        set_uniform(prog, "u_screen", (float(w), float(h)))
+        set_uniform(prog, "u_threshold", (tu, tv))
         if settings.mode == "fixed":
-            _set(prog, "u_level", tuple(float(x) for x in settings.levels))
-            _set(prog, "u_adaptive", 0)
+            set_uniform(prog, "u_level", tuple(float(x) for x in settings.levels))
+            set_uniform(prog, "u_adaptive", 0)
         else:
-            _set(prog, "u_level", (float(settings.base_level), float(settings.base_level)))
-            _set(prog, "u_adaptive", 1)
-        _set(prog, "u_clamp", (float(settings.l_min), float(settings.l_max)))
-        _set(prog, "u_overlap", float(settings.overlap))
-        _set(prog, "u_near", float(camera.near))
-        _set(prog, "u_light", tuple(float(x) for x in LIGHT))
+            set_uniform(prog, "u_level", (float(settings.base_level), float(settings.base_level)))
+            set_uniform(prog, "u_adaptive", 1)
+        set_uniform(prog, "u_clamp", (float(settings.l_min), float(settings.l_max)))
+        set_uniform(prog, "u_overlap", float(settings.overlap))
+        set_uniform(prog, "u_near", float(camera.near))
+        set_uniform(prog, "u_light", tuple(float(x) for x in LIGHT))
         for binding, b in enumerate((self._params, self._inst_f, self._inst_u, self._materials)):
             b.buf.bind_to_storage_buffer(binding)
         self._counters.bind_to_storage_buffer(4)
@@ -408,7 +398,7 @@ class TessRenderer:
                                             ("u_depth", tg.depth), ("u_normal", tg.normal),
                                             ("u_object", tg.object))):
             tex.use(location=unit)
-            _set(resolve, name, unit)
+            set_uniform(resolve, name, unit)
         self._resolve_vao(resolve).render(mode=moderngl.TRIANGLES, vertices=3)
         ctx.finish()
         t4 = time.perf_counter()
