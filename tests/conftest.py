@@ -77,7 +77,7 @@ def record_direct_points(settings, size):
     return stats, color.reshape(-1), pix.get(), key.get(), total
 
 
-# --- stored-reference images (tests/test_reference_images.py) ---------------------------------
+# --- stored-reference images (tests/pipeline/test_reference_images.py) ---------------------------------
 
 import contextlib  # noqa: E402
 

@@ -12,7 +12,7 @@ import paramlod as pl
 from paramlod.function.plugins import evaluate_cl
 from paramlod.function.registry import builtin_functions, describe_functions
 
-FUNCTIONS_DIR = Path(__file__).resolve().parent.parent / "functions"
+FUNCTIONS_DIR = Path(__file__).resolve().parents[2] / "functions"
 LIBRARY = ["plane", "sphere", "torus", "cone", "johis_heart", "spiky_heart", "palm_trunk", "sh_glyph",
            "sh_glyph_tournier", "yarn", "fiber", "seashell1", "seashell2", "seashell3", "giant_worm",
            "giant_worm_jaw_outer", "giant_worm_jaw_inner", "giant_worm_tongue"]

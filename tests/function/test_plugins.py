@@ -268,7 +268,7 @@ def test_part_errors():
 def test_the_writing_plugins_guide_runs(tmp_path, monkeypatch):
     """docs/writing-plugins.md: the plugin file is written where it says, then every other Python
     block runs in order (they load the folder, render, and build a composite object)."""
-    text = (HERE.parent / "docs" / "writing-plugins.md").read_text()
+    text = (HERE.parents[1] / "docs" / "writing-plugins.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
     assert len(blocks) >= 3
     monkeypatch.chdir(tmp_path)

@@ -6,7 +6,7 @@ code before the restructuring of issue 14; see tests/refs/README.md for how they
 On any other OpenCL or OpenGL device the comparison is skipped with the devices named (roundoff
 changes the LOD decisions); a missing reference always fails.
 
-Regenerate with ``pytest tests/test_reference_images.py --regen-refs`` (writes tests/refs/*.png
+Regenerate with ``pytest tests/pipeline/test_reference_images.py --regen-refs`` (writes tests/refs/*.png
 and says which). On a failure the rendered image, the reference and an amplified difference are
 written to a folder named in the assertion message.
 
@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-REFS = Path(__file__).resolve().parent / "refs"
+ROOT = Path(__file__).resolve().parents[2]
+REFS = Path(__file__).resolve().parents[1] / "refs"
 
 BAD_LEVEL = 16           # a pixel "differs" when one channel is off by more than this (of 255)
 BAD_FRACTION = 0.002     # ... and at most this share of the pixels may differ (~18 of 96x96)
@@ -196,7 +196,7 @@ def test_reference_image(case, tmp_path, regen_refs, devices):
     if regen_refs is None:
         missing = [p for p in (ref_png, ref_ids_png) if not p.exists()]
         assert not missing, (f"reference missing: {', '.join(map(str, missing))}; "
-                             "render it with `pytest tests/test_reference_images.py --regen-refs`")
+                             "render it with `pytest tests/pipeline/test_reference_images.py --regen-refs`")
     if not on_reference_devices(devices):
         pytest.skip("stored references are for PoCL + llvmpipe; this run has OpenCL "
                     + "; OpenGL ".join(device_lines(devices)))

@@ -8,7 +8,7 @@ import pytest
 from paramlod.app.cli import main
 from paramlod.app.gallery import render_scene_file
 
-GALLERY = Path(__file__).resolve().parents[1] / "gallery"
+GALLERY = Path(__file__).resolve().parents[2] / "gallery"
 SCENES = sorted(GALLERY.glob("*.toml"))
 
 

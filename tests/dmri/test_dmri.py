@@ -18,7 +18,7 @@ import paramlod as pl  # noqa: E402
 from paramlod import dmri  # noqa: E402
 from paramlod.errors import DmriError  # noqa: E402
 
-GALLERY_DATA = Path(__file__).resolve().parents[1] / "gallery" / "data"
+GALLERY_DATA = Path(__file__).resolve().parents[2] / "gallery" / "data"
 
 
 def _quiet(fn, *a, **k):
