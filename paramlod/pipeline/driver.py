@@ -36,7 +36,7 @@ class Pipeline:
     def render(self, scene: Scene, camera: Camera, variant: str | None = None,
                settings: RenderSettings | None = None, time_: float | None = None):
         """A Frame of ``scene`` seen by ``camera``; see ``paramlod.render``."""
-        frames = self._draw(scene, camera, variant, settings, time_)
+        frames = self.passes(scene, camera, variant, settings, time_)
         if len(frames) == 1:
             return frames[0]
         return composite(frames, background=scene.background)
@@ -48,7 +48,9 @@ class Pipeline:
         frame = self.render(scene, camera, variant, settings)
         return frame.stats
 
-    def _draw(self, scene, camera, variant, settings, time_):
+    def passes(self, scene: Scene, camera: Camera, variant: str | None = None,
+               settings: RenderSettings | None = None, time_: float | None = None) -> list:
+        """The Frames of the frame's passes, coarsest first, before they are composited."""
         if not isinstance(scene, Scene):
             raise SceneError(f"render needs a paramlod.Scene, got {type(scene).__name__}")
         if not isinstance(camera, Camera):
@@ -178,9 +180,16 @@ def render_on_device(scene: Scene, camera: Camera, variant: str | None = None,
     return PIPELINE.render_on_device(scene, camera, variant, settings)
 
 
+def render_passes(scene: Scene, camera: Camera, variant: str | None = None,
+                  settings: RenderSettings | None = None, time: float | None = None) -> list:
+    """The Frames of the passes ``render`` composites (one per key-buffer subsample count and per
+    GL group), coarsest first: what a mixed frame is made of."""
+    return PIPELINE.passes(scene, camera, variant, settings, time)
+
+
 def scene_state(scene: Scene) -> SceneState:
     """The pipeline's state for ``scene`` (its passes, renderer states and key buffers)."""
     return PIPELINE.state(scene)
 
 
-__all__ = ["Pipeline", "PIPELINE", "render", "render_on_device", "scene_state"]
+__all__ = ["Pipeline", "PIPELINE", "render", "render_on_device", "render_passes", "scene_state"]
