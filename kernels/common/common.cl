@@ -1,43 +1,10 @@
-// Shared definitions for paramlod's OpenCL kernels. The generated function code (pl_position,
-// pl_surface) is inserted after this file; see paramlod/codegen.py.
+// Shared helpers of paramlod's OpenCL kernels. paramlod.device.programs.build puts the prelude
+// (paramlod.core.layouts.cl_prelude: the records' offsets and structs -- EvalPatch, RenderPatch,
+// INST_*, CAM_*, MAT_*, LIGHT_*, LOD_* -- the shading constants and the sRGB table) before this
+// file; the generated function code (pl_position, pl_surface; paramlod.function.codegen_cl) comes
+// after it.
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
-
-// Patch waiting for evaluation in an LOD step (32 bytes, numpy: paramlod.patches.EVAL_DTYPE).
-typedef struct {
-    float4 range;   // u0, u1, v0, v1
-    uint inst;
-    uint pad0, pad1, pad2;
-} EvalPatch;
-
-// Patch scheduled for rendering (64 bytes, numpy: paramlod.patches.RENDER_DTYPE).
-typedef struct {
-    float4 range;   // u0, u1, v0, v1
-    float4 bbox;    // screen x0, y0, x1, y1 in pixels (of the samples in front of the camera)
-    // e_u, e_v: the thesis's measured extents (longest of the 4 polylines per direction);
-    // s_u, s_v: 7 x the longest single segment, an upper estimate for even sampling
-    float4 ext;
-    uint inst;
-    uint flags;     // bits 0-3: LOD step; bit 4: forced at the last step
-    uint pad0, pad1;
-} RenderPatch;
-
-#define FLAG_FORCED 16u
-
-// Instance record offsets (paramlod/scene.py): model matrix rows, normal matrix rows, domain.
-#define INST_F 32
-#define INST_U 4
-#define INST_MODEL 0
-#define INST_NORMAL 16
-#define INST_DOMAIN 28
-
-// Camera record (paramlod/render.py): view rows, projection rows, width, height, near, far.
-#define CAM_VIEW 0
-#define CAM_PROJ 16
-#define CAM_W 32
-#define CAM_H 33
-#define CAM_NEAR 34
-#define CAM_FAR 35
 
 inline float3 xform_point(__global const float* m, float3 p) {
     return (float3)(m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],

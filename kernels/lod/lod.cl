@@ -3,17 +3,11 @@
 // columns, and a 5x5 grid of extra samples for the frustum test and the screen bounding box.
 // Each line's screen polyline length is compared with the threshold; a line that exceeds it
 // splits the half of the patch it lies in (7 patterns, docs/lod.md). The numpy twin of this
-// kernel is paramlod/lod_reference.py: keep both in step.
-
-// Counter layout (paramlod/lod.py): one record of LOD_COUNTERS uints per step; record 0 holds the
-// initial patch count and the render-list total.
-#define LOD_COUNTERS 8
-#define LOD_RENDER_TOTAL 1
-#define C_CHILDREN 0
-#define C_SPLIT 1
-#define C_CULLED 2
-#define C_RENDERED 3
-#define C_FORCED 4
+// kernel is paramlod/lod/reference.py: keep both in step.
+//
+// Counters: one record of LOD_COUNTERS uints per step (LOD_CHILDREN, LOD_SPLIT, ...); record 0
+// holds the initial patch count and, at LOD_RENDER_TOTAL, the render list's length. These, the
+// patch structs and LOD_LOCAL come from the prelude (paramlod.core.layouts).
 
 typedef struct {
     float2 s;      // screen position in pixels
@@ -74,7 +68,7 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, float 
 {
     uint inst = patch.inst;
     float u0 = patch.range.x, u1 = patch.range.y, v0 = patch.range.z, v1 = patch.range.w;
-    if (code != 0u) { atomic_inc(&counters[C_CULLED]); return; }  // every sample outside one clip plane
+    if (code != 0u) { atomic_inc(&counters[LOD_CULLED]); return; }  // every sample outside one clip plane
 
     bool a = eu[0] > t_u || eu[1] > t_u;   // u-lines in the lower v half
     bool b = eu[2] > t_u || eu[3] > t_u;   // u-lines in the upper v half
@@ -96,44 +90,44 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, float 
             r.pad0 = r.pad1 = 0u;
             render[slot] = r;
         }
-        atomic_inc(&counters[C_RENDERED]);
-        if (split) atomic_inc(&counters[C_FORCED]);
+        atomic_inc(&counters[LOD_RENDERED]);
+        if (split) atomic_inc(&counters[LOD_FORCED]);
         return;
     }
 
-    atomic_inc(&counters[C_SPLIT]);
+    atomic_inc(&counters[LOD_SPLIT]);
     float mu = 0.5f * (u0 + u1), mv = 0.5f * (v0 + v1);
     if ((a || b) && (c || d)) {                 // 1:4
-        uint s = atomic_add(&counters[C_CHILDREN], 4u);
+        uint s = atomic_add(&counters[LOD_CHILDREN], 4u);
         emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
         emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
         emit(out, s + 2, out_cap, u0, mu, mv, v1, inst);
         emit(out, s + 3, out_cap, mu, u1, mv, v1, inst);
     } else if (a && b) {                        // 1:2, cut u
-        uint s = atomic_add(&counters[C_CHILDREN], 2u);
+        uint s = atomic_add(&counters[LOD_CHILDREN], 2u);
         emit(out, s + 0, out_cap, u0, mu, v0, v1, inst);
         emit(out, s + 1, out_cap, mu, u1, v0, v1, inst);
     } else if (c && d) {                        // 1:2, cut v
-        uint s = atomic_add(&counters[C_CHILDREN], 2u);
+        uint s = atomic_add(&counters[LOD_CHILDREN], 2u);
         emit(out, s + 0, out_cap, u0, u1, v0, mv, inst);
         emit(out, s + 1, out_cap, u0, u1, mv, v1, inst);
     } else if (a) {                             // 1:3, lower v half cut in u
-        uint s = atomic_add(&counters[C_CHILDREN], 3u);
+        uint s = atomic_add(&counters[LOD_CHILDREN], 3u);
         emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
         emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
         emit(out, s + 2, out_cap, u0, u1, mv, v1, inst);
     } else if (b) {                             // 1:3, upper v half cut in u
-        uint s = atomic_add(&counters[C_CHILDREN], 3u);
+        uint s = atomic_add(&counters[LOD_CHILDREN], 3u);
         emit(out, s + 0, out_cap, u0, u1, v0, mv, inst);
         emit(out, s + 1, out_cap, u0, mu, mv, v1, inst);
         emit(out, s + 2, out_cap, mu, u1, mv, v1, inst);
     } else if (c) {                             // 1:3, left u half cut in v
-        uint s = atomic_add(&counters[C_CHILDREN], 3u);
+        uint s = atomic_add(&counters[LOD_CHILDREN], 3u);
         emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
         emit(out, s + 1, out_cap, u0, mu, mv, v1, inst);
         emit(out, s + 2, out_cap, mu, u1, v0, v1, inst);
     } else {                                    // 1:3, right u half cut in v
-        uint s = atomic_add(&counters[C_CHILDREN], 3u);
+        uint s = atomic_add(&counters[LOD_CHILDREN], 3u);
         emit(out, s + 0, out_cap, u0, mu, v0, v1, inst);
         emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
         emit(out, s + 2, out_cap, mu, u1, mv, v1, inst);
@@ -161,12 +155,11 @@ inline float2 lod_uv(uint s, float u0, float v0, float du, float dv) {
 // of input patches is read on the device (the previous step's child count), so the host enqueues
 // all steps without waiting and reads the counters once per frame; work-groups stride over the
 // patches. A step whose input overflowed its buffer only sees the first `cap` patches: the host
-// detects that afterwards and redoes the stage.
-#define LOD_LOCAL 32
+// detects that afterwards and redoes the stage. LOD_LOCAL: the prelude's (the host launches with it).
 __kernel __attribute__((reqd_work_group_size(LOD_LOCAL, 1, 1)))
 void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
               __global RenderPatch* render, uint render_cap,
-              __global uint* counters,   // per step: LOD_COUNTERS uints; see lod.py
+              __global uint* counters,   // per step: LOD_COUNTERS uints; see paramlod/lod/stage.py
               __global const float* inst_f, __global const uint* inst_u,
               __global const float* params, __global const float* cam,
               float t_u, float t_v, uint step, uint force)
@@ -176,7 +169,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
     __local float4 box_part[LOD_LOCAL];
     __local uint code_part[LOD_LOCAL];
     __local float line[16];   // 0..3 u-line lengths, 4..7 v-line lengths, 8..15 their longest segments
-    uint n_in = min(counters[(step - 1) * LOD_COUNTERS + C_CHILDREN], cap);
+    uint n_in = min(counters[(step - 1) * LOD_COUNTERS + LOD_CHILDREN], cap);
     __global uint* c = counters + step * LOD_COUNTERS;
     __global uint* render_count = counters + LOD_RENDER_TOTAL;
     uint l = get_local_id(0);
@@ -184,8 +177,8 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
         EvalPatch patch = in[i];
         uint inst = patch.inst;
         __global const float* I = inst_f + inst * INST_F;
-        uint func = inst_u[inst * INST_U + 0];
-        __global const float* P = params + inst_u[inst * INST_U + 1];
+        uint func = inst_u[inst * INST_U + INST_FUNC];
+        __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
         float u0 = patch.range.x, v0 = patch.range.z;
         float du = patch.range.y - u0, dv = patch.range.w - v0;
         float4 box = (float4)(INFINITY, INFINITY, -INFINITY, -INFINITY);

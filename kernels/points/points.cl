@@ -180,9 +180,9 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
             RenderPatch rp = patches[pid];
             uint inst = rp.inst;
             __global const float* I = inst_f + inst * INST_F;
-            uint func = inst_u[inst * INST_U + 0];
-            __global const float* P = params + inst_u[inst * INST_U + 1];
-            uint object_id = inst_u[inst * INST_U + 2];
+            uint func = inst_u[inst * INST_U + INST_FUNC];
+            __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
+            uint object_id = inst_u[inst * INST_U + INST_OBJECT];
             float4 mat = materials[inst];
             PointGrid g = point_grid(rp, I, factor, use_extent, widen, max_side);
             uint total_here = g.nu * g.nv;

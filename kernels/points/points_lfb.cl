@@ -171,8 +171,8 @@ void points_lfb(__global const RenderPatch* patches, __global const int4* rects,
             PointGrid g = cg[k];
             uint inst = cinst[k];
             __global const float* I = inst_f + inst * INST_F;
-            __global const float* P = params + inst_u[inst * INST_U + 1];
-            uint func = inst_u[inst * INST_U + 0];
+            __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
+            uint func = inst_u[inst * INST_U + INST_FUNC];
             float u = g.u0 + g.su * (float)(s % g.nu), v = g.v0 + g.sv * (float)(s / g.nu);
             bool first = cfirst[k] != 0u;
             float fx, fy;
@@ -204,7 +204,7 @@ void points_lfb(__global const RenderPatch* patches, __global const int4* rects,
                         || qx >= (float)(sx0 + LFB_SIDE) + 1.0f || qy >= (float)(sy0 + LFB_SIDE) + 1.0f) continue;
             }
             ulong key, aux;
-            int res = point_sample(func, P, I, cam, materials[inst], light, inst_u[inst * INST_U + 2],
+            int res = point_sample(func, P, I, cam, materials[inst], light, inst_u[inst * INST_U + INST_OBJECT],
                                    u, v, &fx, &fy, &key, &aux);
 #ifdef PL_RECORD
             if (first) rec_sub[rec_offset[cpid[k]] + s] = 0xFFFFFFFFu;

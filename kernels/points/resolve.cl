@@ -15,7 +15,7 @@
 __kernel __attribute__((reqd_work_group_size(RESOLVE_LOCAL, 1, 1)))
 void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uint n,
              __global float4* color, __global float* depth, __global float4* normal,
-             __global uint* object_id, __global uchar4* image, uint background,
+             __global uint* object_id, __global uchar* image, uint background,
              __global const uint* lin, __global const uint* thr, __global uint* counts)
 {
     __local uint written, covered;
@@ -26,12 +26,14 @@ void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uin
         ulong k = color_buf[i];
         if (k == 0xFFFFFFFFFFFFFFFFul) {
             color[i] = (float4)(0.0f); depth[i] = INFINITY; normal[i] = (float4)(0.0f); object_id[i] = 0u;
-            image[i] = (uchar4)(background >> 24, (background >> 16) & 255u, (background >> 8) & 255u, 255u);
+            // packed RGB, 3 bytes a pixel: what the host reads is the image as it is
+            image[3 * i] = background >> 24; image[3 * i + 1] = (background >> 16) & 255u;
+            image[3 * i + 2] = (background >> 8) & 255u;
         } else {
             uint rgba = (uint)k;
             float4 s = (float4)((rgba >> 24) & 255u, (rgba >> 16) & 255u, (rgba >> 8) & 255u, rgba & 255u) / 255.0f;
-            float3 lin3 = select(pow((s.xyz + 0.055f) / 1.055f, (float3)(2.4f)), s.xyz / 12.92f,
-                                 isless(s.xyz, (float3)(0.04045f)));
+            float3 lin3 = select(pow((s.xyz + PL_SRGB_OFFSET) / PL_SRGB_SCALE, (float3)(PL_SRGB_GAMMA)),
+                                 s.xyz / PL_SRGB_SLOPE, isless(s.xyz, (float3)(PL_SRGB_DECODE_CUTOFF)));
             color[i] = (float4)(lin3, s.w);
             depth[i] = as_float((uint)(k >> 32));
             ulong a = aux_buf[i];
@@ -54,7 +56,7 @@ void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uin
                 out[c] = al == 255u ? code
                     : encode_srgb8((uint)(((ulong)lin[code] * al + (ulong)lin[bg] * (255u - al) + 127u) / 255u), thr);
             }
-            image[i] = (uchar4)(out[0], out[1], out[2], 255u);
+            image[3 * i] = out[0]; image[3 * i + 1] = out[1]; image[3 * i + 2] = out[2];
             atomic_inc(&written);
             atomic_add(&covered, convert_uint(rint(s.w * (float)PL_SS_COUNT)));
         }

@@ -1,6 +1,9 @@
-// Shared by the tessellation renderer's shader stages (paramlod/tess.py). tess.py prepends
-// "#version 450 core" and the PL_* defines; the tessellation stages then get this file, the
-// generated function code (paramlod/codegen_glsl.py: pl_position, pl_surface) and their own file.
+// Shared by the tessellation renderer's shader stages (paramlod/renderers/tess.py) and the GLSL
+// probe (paramlod/function/probes.py). They prepend "#version 450 core", the stage's PL_* defines
+// and the prelude (paramlod.core.layouts.glsl_prelude: the records' PL_INST_*, PL_MAT_*, ... offsets
+// and sizes, the patch structs, PL_SPECULAR_EXPONENT); the tessellation stages then get this file,
+// the generated function code (paramlod/function/codegen_glsl.py: pl_position, pl_surface) and
+// their own file.
 
 #define PL_NAN uintBitsToFloat(0x7fc00000u)
 #define PL_INF uintBitsToFloat(0x7f800000u)
@@ -9,19 +12,12 @@
 
 // Scene data (Scene.instance_buffers(), Scene.materials()), read-only shader storage buffers.
 layout(std430, binding = 0) readonly buffer PlParams { float pl_params[]; };   // flat parameter blocks
-layout(std430, binding = 1) readonly buffer PlInstF { float pl_inst_f[]; };    // [n][32] floats
-layout(std430, binding = 2) readonly buffer PlInstU { uint pl_inst_u[]; };     // [n][4] uints
-layout(std430, binding = 3) readonly buffer PlMaterials { vec4 pl_materials[]; };
+layout(std430, binding = 1) readonly buffer PlInstF { float pl_inst_f[]; };    // [n][PL_INST_F] floats
+layout(std430, binding = 2) readonly buffer PlInstU { uint pl_inst_u[]; };     // [n][PL_INST_U] uints
+layout(std430, binding = 3) readonly buffer PlMaterials { vec4 pl_materials[]; };  // material record: rgb, specular
 // Counters read back into Frame.stats: NaN vertices (evaluation stage), the device's real sample
 // count per pixel of the multisampled targets (resolve pass).
 layout(std430, binding = 4) buffer PlCounters { uint pl_nan_vertices; uint pl_device_samples; };
-
-// Instance record offsets (paramlod/scene.py, kernels/common.cl).
-#define PL_INST_F 32u
-#define PL_INST_U 4u
-#define PL_INST_MODEL 0u
-#define PL_INST_NORMAL 16u
-#define PL_INST_DOMAIN 28u
 
 uniform mat4 u_view;        // world -> view
 uniform mat4 u_proj;        // view -> clip

@@ -36,8 +36,8 @@ void main() {
     uint inst = vs_inst[0];
     if (gl_InvocationID == 0) {
         if (u_adaptive != 0) {
-            uint func = pl_inst_u[inst * PL_INST_U + 0u];
-            uint P = pl_inst_u[inst * PL_INST_U + 1u];
+            uint func = pl_inst_u[inst * PL_INST_U + PL_INST_FUNC];
+            uint P = pl_inst_u[inst * PL_INST_U + PL_INST_PARAMS];
             uint M = inst * PL_INST_F + PL_INST_MODEL;
             // quad domain: outer 0 is the edge u = u0, 1 is v = v0, 2 is u = u1, 3 is v = v1;
             // each edge's screen polyline through 8 samples (one call site of pl_position, so

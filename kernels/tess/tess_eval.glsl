@@ -17,8 +17,8 @@ flat out uint te_object;     // 1-based object id
 
 void main() {
     uint inst = tc_inst;
-    uint func = pl_inst_u[inst * PL_INST_U + 0u];
-    uint P = pl_inst_u[inst * PL_INST_U + 1u];
+    uint func = pl_inst_u[inst * PL_INST_U + PL_INST_FUNC];
+    uint P = pl_inst_u[inst * PL_INST_U + PL_INST_PARAMS];
     float u = pl_lerp(tc_range.x, tc_range.y, gl_TessCoord.x);
     float v = pl_lerp(tc_range.z, tc_range.w, gl_TessCoord.y);
     // f and its partials; where the parametrization degenerates (a pole, a collapsed edge) the
@@ -48,6 +48,6 @@ void main() {
     te_normal = (ln > 1e-30 && !isnan(ln) && !isinf(ln)) ? nv / ln : vec3(0.0);
     te_view = e;
     te_material = pl_materials[inst];
-    te_object = pl_inst_u[inst * PL_INST_U + 2u];
+    te_object = pl_inst_u[inst * PL_INST_U + PL_INST_OBJECT];
     gl_Position = u_proj * vec4(e, 1.0);
 }

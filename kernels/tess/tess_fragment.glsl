@@ -1,5 +1,6 @@
-// Fragment stage: the point renderer's shading (kernels/keys.cl shade(): two-sided Blinn-Phong in
-// view space) and the Frame's extra channels, into four colour attachments:
+// Fragment stage: the shading model (common/shading.cl, the body the point renderer's shade()
+// uses too: two-sided Blinn-Phong in view space) and the Frame's extra channels, into four colour
+// attachments:
 //   0 colour RGBA16F (linear RGB, alpha 1: alpha 0 = nothing drawn), 1 linear view depth R32F,
 //   2 world-space normal facing the viewer RGBA16F, 3 object id R32UI.
 centroid in vec3 te_view;
@@ -13,19 +14,16 @@ layout(location = 1) out float out_depth;
 layout(location = 2) out vec4 out_normal;
 layout(location = 3) out uint out_object;
 
-uniform vec4 u_light;   // towards the light in view space (xyz), ambient share (w)
+uniform vec4 u_light;   // the light record: towards the light in view space (xyz), ambient share (w)
+
+#include "common/dialect.glsl"
+#include "common/shading.cl"
 
 void main() {
     if (te_bad > 0.0) discard;
     vec3 ev = normalize(-te_view);
-    float ln = length(te_normal);
-    vec3 n = (ln > 1e-30 && !isnan(ln)) ? te_normal / ln : ev;   // degenerate: face the eye
-    if (dot(n, ev) < 0.0) n = -n;
-    vec3 L = u_light.xyz;
-    float ambient = u_light.w;
-    float diff = max(dot(n, L), 0.0);
-    float spec = te_material.w * pow(max(dot(n, normalize(L + ev)), 0.0), 48.0);
-    vec3 rgb = te_material.xyz * (ambient + (1.0 - ambient) * diff) + vec3(spec);
+    vec3 n = pl_facing_normal(te_normal, ev);
+    vec3 rgb = pl_shade_rgb(n, ev, te_material.xyz, te_material.w, u_light.xyz, u_light.w);
     out_color = vec4(clamp(rgb, 0.0, 1.0), 1.0);
     out_depth = -te_view.z;
     out_normal = vec4(transpose(mat3(u_view)) * n, 0.0);

@@ -1,1 +1,1 @@
-"""Camera, transforms, Frame, atomic files, colour and the CPU<->GPU record layouts (stdlib + numpy only)."""
+"""Camera, transforms, Frame, atomic files, colour, shading constants and the CPU<->GPU record layouts (stdlib + numpy only)."""

@@ -1,7 +1,12 @@
-"""sRGB on the host: the one copy of the transfer curve in Python (numpy only).
+"""sRGB, the one copy: the transfer curve on the host (numpy only) and what the device gets of it.
 
-The device copies are ``encode_srgb8`` in kernels/points/subsamples.cl (through ``srgb_tables``)
-and the shading in kernels/common/keys.cl; their numpy twins call the functions here.
+The device reads everything of sRGB from here: ``cl_tables()`` (part of the OpenCL prelude,
+``paramlod.core.layouts.cl_prelude``) emits the curve's constants (``PL_SRGB_*``: the pow decode of
+kernels/points/resolve.cl) and ``srgb8_thresholds()`` as the ``SRGB8_THRESHOLDS`` table that
+``srgb8()`` in kernels/common/keys.cl searches; ``srgb_tables()`` are uploaded for the integer
+encoder ``encode_srgb8`` in kernels/points/subsamples.cl (paramlod.renderers.targets). The
+tessellation shaders write linear colour; the host encodes it (``linear_to_srgb8``). The numpy
+twins of the kernels call the functions here.
 
 Two encoders share the curve and differ only in the precision of the arithmetic, which matters:
 on float32 input the two disagree by one code on 203 of the 1,065,353,217 float32 values in
@@ -18,18 +23,26 @@ import numpy as np
 
 LIN_BITS = 24   # fixed-point scale of linear colour in the resolve: 9 x 2^24 fits in 32 bits
 
+# The curve (IEC 61966-2-1). Python floats, so that float32 arrays stay float32 in the arithmetic.
+SRGB_DECODE_CUTOFF = 0.04045     # encoded values at or below it are linear / SRGB_SLOPE
+SRGB_ENCODE_CUTOFF = 0.0031308   # linear values at or below it are encoded x SRGB_SLOPE
+SRGB_SLOPE = 12.92
+SRGB_OFFSET = 0.055
+SRGB_SCALE = 1.055               # 1 + SRGB_OFFSET (kept as its own literal: its float32 is not 1 + 0.055f)
+SRGB_GAMMA = 2.4
+
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     """sRGB values in [0, 1] to linear, float64."""
     c = np.asarray(c, np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return np.where(c <= SRGB_DECODE_CUTOFF, c / SRGB_SLOPE, ((c + SRGB_OFFSET) / SRGB_SCALE) ** SRGB_GAMMA)
 
 
 def linear_to_srgb8(c: np.ndarray) -> np.ndarray:
     """Linear values to 8-bit sRGB codes (every channel given; clamped to [0, 1]; rounded half
     up), computed in the input's precision: float32 in, float32 arithmetic."""
     c = np.clip(c, 0.0, 1.0)
-    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+    s = np.where(c <= SRGB_ENCODE_CUTOFF, SRGB_SLOPE * c, SRGB_SCALE * np.power(c, 1 / SRGB_GAMMA) - SRGB_OFFSET)
     return (s * 255.0 + 0.5).astype(np.uint8)
 
 
@@ -57,3 +70,34 @@ def srgb_tables() -> tuple[np.ndarray, np.ndarray]:
     thr = np.rint(srgb_to_linear(np.maximum(codes - 0.5, 0.0) / 255.0) * scale).astype(np.uint32)
     thr[0] = 0
     return lin, thr
+
+
+def srgb8_thresholds() -> np.ndarray:
+    """float32 [256]: the linear value at which each sRGB 8-bit code begins (code k from
+    (k - 1/2) / 255 in sRGB, decoded in float64), entry 0 below every input (-1). The largest k
+    with t[k] <= x is the code that rounding the exact curve gives: ``srgb8()`` in keys.cl
+    searches it instead of calling pow(x, 1/2.4), which dominated the point renderer's
+    per-sample cost on CPUs."""
+    codes = np.arange(256, dtype=np.float64)
+    t = srgb_to_linear(np.maximum(codes - 0.5, 0.0) / 255.0).astype(np.float32)
+    t[0] = -1.0
+    return t
+
+
+def _cl_float(x) -> str:
+    """An OpenCL float literal that parses back to the same float32 (shortest round trip)."""
+    return np.format_float_positional(np.float32(x), unique=True, trim="0") + "f"
+
+
+def cl_tables() -> str:
+    """The sRGB part of the OpenCL prelude: the curve's constants and SRGB8_THRESHOLDS."""
+    consts = [("PL_SRGB_DECODE_CUTOFF", SRGB_DECODE_CUTOFF), ("PL_SRGB_ENCODE_CUTOFF", SRGB_ENCODE_CUTOFF),
+              ("PL_SRGB_SLOPE", SRGB_SLOPE), ("PL_SRGB_OFFSET", SRGB_OFFSET), ("PL_SRGB_SCALE", SRGB_SCALE),
+              ("PL_SRGB_GAMMA", SRGB_GAMMA)]
+    lines = ["// sRGB (paramlod/core/color.py): the curve's constants and the encoder's thresholds"]
+    lines += [f"#define {name} {_cl_float(v)}" for name, v in consts]
+    t = [_cl_float(x) for x in srgb8_thresholds()]
+    lines.append("__constant float SRGB8_THRESHOLDS[256] = {")
+    lines += ["    " + ", ".join(t[i:i + 8]) + "," for i in range(0, 256, 8)]
+    lines.append("};")
+    return "\n".join(lines)

@@ -1,20 +1,301 @@
-"""Records shared by the host and the device, declared once.
+"""Every record shared by the host and the device, declared once, and the preludes emitted from
+the declarations for the OpenCL and GLSL sources.
 
-The camera record (36 floats): view matrix (16, row-major), projection matrix (16, row-major),
-then width, height, near, far. Read by kernels/lod/lod.cl, kernels/points/*.cl and
-kernels/surfels/surfels_splat.cl through common.cl's CAM_* offsets.
+A record is a list of fields (name, type, count). Two kinds:
+
+- *flat* records (camera, instance floats and uints, material, light, LOD counters): arrays of one
+  scalar type read by element offsets. The host builds them as plain float32/uint32 arrays
+  (``record.length`` elements each, ``record.slice(field)`` for a field); the kernels read
+  ``PREFIX_FIELD`` offsets and the ``size`` macro (``INST_F``, ``CAM_FLOATS``, ...).
+- *struct* records (the LOD stage's patches): C structs in OpenCL, std430 structs in GLSL, and
+  a packed numpy structured dtype (``record.dtype``) on the host. A float field of 2 or 4 is a
+  vector (float4 / vec4); any other count of more than one is that many scalars ``name0``,
+  ``name1``, ... (so that no float3 or array stride differs between the three). The layout is
+  checked here: every vector sits at a multiple of its size and the record's size is a multiple
+  of its largest alignment, so the packed numpy offsets are the C and std430 offsets.
+
+``cl_prelude()`` and ``glsl_prelude()`` return the ``#define``s (offsets, sizes, record constants),
+the structs, the shading model's constants (``paramlod.core.shading``) and, for OpenCL, the sRGB
+encoding table (``paramlod.core.color``). ``paramlod.device.programs.build`` puts the OpenCL one in
+front of every program, the tessellation renderer and the GLSL probe the GLSL one in front of every
+stage (after ``#version``). In GLSL every name carries a ``PL_`` prefix and every integer a ``u``
+suffix (``PL_INST_F 32u``). ``vertex_format`` gives the moderngl vertex format that reads some of
+a struct record's fields as vertex attributes (the tessellation renderer's render list).
+tests/core/test_layouts.py compiles both preludes and compares the sizes and offsets the devices
+see with these.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from functools import lru_cache
+
 import numpy as np
 
-CAMERA_FLOATS = 36
+from paramlod.core import color, shading
+
+FLOAT, UINT = "float", "uint"
+_NUMPY = {FLOAT: "<f4", UINT: "<u4"}
+_CL_VEC = {2: "float2", 4: "float4"}
+_SCALAR = {FLOAT: "float", UINT: "uint"}
+_GLSL_VEC = {2: "vec2", 4: "vec4"}
+_MODERNGL = {FLOAT: "f", UINT: "u"}
+
+
+@dataclass(frozen=True)
+class Field:
+    name: str
+    type: str = FLOAT
+    count: int = 1
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Constant:
+    """A named value that belongs to a record (a flag bit, a slot with a second meaning)."""
+    name: str
+    value: int
+    unsigned: bool = True   # CL: 16u (GLSL constants are always uint)
+    doc: str = ""
+
+
+class Record:
+    """One CPU<->GPU record. ``prefix``: the offset macros' prefix (flat records); ``size``: the
+    macro of its length in elements (flat records); ``struct``: the struct name (struct records)."""
+
+    def __init__(self, name: str, doc: str, fields, *, prefix: str = "", size: str = "", struct: str = "",
+                 constants=()):
+        self.name, self.doc, self.fields = name, doc, tuple(fields)
+        self.prefix, self.size_macro, self.struct = prefix, size, struct
+        self.constants = tuple(constants)
+        self.dtype = np.dtype([(f.name, _NUMPY[f.type]) if f.count == 1 else (f.name, _NUMPY[f.type], f.count)
+                               for f in self.fields])
+        if struct:
+            align = 4
+            for f in self.fields:
+                if f.type == FLOAT and f.count in _CL_VEC:
+                    size_b = 4 * f.count
+                    if self.dtype.fields[f.name][1] % size_b:
+                        raise ValueError(f"record {name}: vector field {f.name!r} at byte "
+                                         f"{self.dtype.fields[f.name][1]}, not a multiple of {size_b}")
+                    align = max(align, size_b)
+            if self.dtype.itemsize % align:
+                raise ValueError(f"record {name}: {self.dtype.itemsize} bytes, not a multiple of its "
+                                 f"alignment {align} (C and std430 would pad it)")
+        else:
+            if not (prefix and size):
+                raise ValueError(f"flat record {name} needs a prefix and a size macro")
+            if len({f.type for f in self.fields}) != 1:
+                raise ValueError(f"flat record {name}: every field must have the same type")
+
+    @property
+    def length(self) -> int:
+        """Elements (floats or uints) of a flat record."""
+        return sum(f.count for f in self.fields)
+
+    @property
+    def size(self) -> int:
+        """Bytes of one record."""
+        return self.dtype.itemsize
+
+    def offset(self, field: str) -> int:
+        """Element offset (flat record) or byte offset (struct record) of ``field``."""
+        off = self.dtype.fields[field][1]
+        return off if self.struct else off // 4
+
+    def slice(self, field: str) -> slice:
+        """The elements of ``field`` in a flat record."""
+        f = next(f for f in self.fields if f.name == field)
+        at = self.offset(field)
+        return slice(at, at + f.count)
+
+    def constant(self, name: str) -> int:
+        """The value of one of the record's constants."""
+        return next(c.value for c in self.constants if c.name == name)
+
+    def macro(self, field: str) -> str:
+        return f"{self.prefix}_{field.upper()}"
+
+    # --- emitters -------------------------------------------------------------------------------
+    def _defines(self, glsl: bool) -> list[str]:
+        pre, suf = ("PL_", "u") if glsl else ("", "")
+        lines = []
+        if not self.struct:
+            lines.append(f"#define {pre}{self.size_macro} {self.length}{suf}")
+            for f in self.fields:
+                lines.append(f"#define {pre}{self.macro(f.name)} {self.offset(f.name)}{suf}"
+                             + (f"   // {f.doc}" if f.doc else ""))
+        for c in self.constants:
+            cs = "u" if (glsl or c.unsigned) else ""
+            lines.append(f"#define {pre}{c.name} {c.value}{cs}" + (f"   // {c.doc}" if c.doc else ""))
+        return lines
+
+    def _struct(self, glsl: bool) -> list[str]:
+        lines = [f"struct {self.struct} {{" if glsl else "typedef struct {"]
+        for f in self.fields:
+            doc = f"   // {f.doc}" if f.doc else ""
+            if f.type == FLOAT and f.count in _CL_VEC:
+                lines.append(f"    {(_GLSL_VEC if glsl else _CL_VEC)[f.count]} {f.name};{doc}")
+            elif f.count == 1:
+                lines.append(f"    {_SCALAR[f.type]} {f.name};{doc}")
+            else:
+                names = ", ".join(f"{f.name}{i}" for i in range(f.count))
+                lines.append(f"    {_SCALAR[f.type]} {names};{doc}")
+        lines.append("};" if glsl else f"}} {self.struct};")
+        return lines
+
+    def emit(self, glsl: bool) -> str:
+        head = f"// {self.name} ({self.size} bytes): {self.doc}"
+        body = (self._struct(glsl) if self.struct else []) + self._defines(glsl)
+        return "\n".join([head, *body])
+
+
+# --- the records --------------------------------------------------------------------------------
+CAMERA = Record(
+    "camera", "a frame's camera; paramlod.core.layouts.camera_record(camera)", [
+        Field("view", FLOAT, 16, "world -> view, row-major"),
+        Field("proj", FLOAT, 16, "view -> clip, row-major"),
+        Field("w", FLOAT, 1, "width in pixels"),
+        Field("h", FLOAT, 1, "height in pixels"),
+        Field("near"), Field("far"),
+    ], prefix="CAM", size="CAM_FLOATS")
+
+INSTANCE_F = Record(
+    "instance floats", "per instance, Scene.instance_buffers()[0]", [
+        Field("model", FLOAT, 16, "4x4 model matrix, row-major"),
+        Field("normal", FLOAT, 12, "3 rows of 4: the normal matrix (inverse transpose of the 3x3 part)"),
+        Field("domain", FLOAT, 4, "u0, u1, v0, v1"),
+    ], prefix="INST", size="INST_F")
+
+INSTANCE_U = Record(
+    "instance uints", "per instance, Scene.instance_buffers()[1]", [
+        Field("func", UINT, 1, "index of the function in the scene's function list"),
+        Field("params", UINT, 1, "offset of its parameter block in the params buffer"),
+        Field("object", UINT, 1, "object id (1-based)"),
+        Field("flags", UINT, 1, "unused, 0"),
+    ], prefix="INST", size="INST_U")
+
+MATERIAL = Record(
+    "material", "per instance, Scene.materials() (float4 / vec4 per instance)", [
+        Field("color", FLOAT, 3, "linear RGB"),
+        Field("specular", FLOAT, 1, "specular weight"),
+    ], prefix="MAT", size="MAT_FLOATS")
+
+LIGHT = Record(
+    "light", "the shading record, paramlod.core.shading.LIGHT (GLSL: uniform vec4 u_light)", [
+        Field("towards", FLOAT, 3, "unit vector towards the light, view space"),
+        Field("ambient", FLOAT, 1, "ambient share"),
+    ], prefix="LIGHT", size="LIGHT_FLOATS")
+
+LOD_COUNTER = Record(
+    "LOD counters", "one record per LOD step (paramlod.lod.stage); record 0 holds the initial "
+    "patch count (children) and the render list's length (LOD_RENDER_TOTAL)", [
+        Field("children", UINT, 1, "patches the step emitted (the next step's input)"),
+        Field("split", UINT), Field("culled", UINT), Field("rendered", UINT),
+        Field("forced", UINT, 1, "rendered although they would split (last step)"),
+        Field("spare", UINT, 3),
+    ], prefix="LOD", size="LOD_COUNTERS",
+    constants=[Constant("LOD_RENDER_TOTAL", 1, False, "counters[LOD_RENDER_TOTAL]: the render list's length")])
+
+EVAL_PATCH = Record(
+    "eval patch", "a patch waiting for evaluation in an LOD step", [
+        Field("range", FLOAT, 4, "u0, u1, v0, v1"),
+        Field("inst", UINT),
+        Field("pad", UINT, 3),
+    ], struct="EvalPatch")
+
+RENDER_PATCH = Record(
+    "render patch", "a patch scheduled for rendering (the LOD stage's render list)", [
+        Field("range", FLOAT, 4, "u0, u1, v0, v1"),
+        Field("bbox", FLOAT, 4, "screen x0, y0, x1, y1 in pixels (of the samples in front of the camera)"),
+        # e_u, e_v: the thesis's measured extents (longest of the 4 polylines per direction);
+        # s_u, s_v: 7 x the longest single segment, an upper estimate for even sampling
+        Field("ext", FLOAT, 4, "e_u, e_v, s_u, s_v in pixels"),
+        Field("inst", UINT),
+        Field("flags", UINT, 1, "bits 0-3: LOD step; bit 4: forced at the last step"),
+        Field("pad", UINT, 2),
+    ], struct="RenderPatch",
+    constants=[Constant("FLAG_FORCED", 16, True, "RenderPatch.flags: forced out at the last step")])
+
+RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH)
+
+# Constants the host and the kernels share that belong to no record: work-group sizes the host
+# launches with and the kernels declare (reqd_work_group_size, __local arrays).
+LAUNCH = (Constant("LOD_LOCAL", 32, False, "work-items measuring one LOD patch together"),)
+
+
+
+def constant(name: str) -> int:
+    """The value of a record's constant or a launch constant, by its (OpenCL) name."""
+    return next(c.value for c in (*LAUNCH, *(c for r in RECORDS for c in r.constants)) if c.name == name)
+
+
+# --- the host's names ---------------------------------------------------------------------------
+CAMERA_FLOATS = CAMERA.length
 
 
 def camera_record(camera) -> np.ndarray:
-    """The camera record of ``camera`` (a paramlod Camera), float32 (36,)."""
-    rec = np.zeros(CAMERA_FLOATS, np.float32)
-    rec[0:16] = camera.view.reshape(-1)
-    rec[16:32] = camera.projection.reshape(-1)
-    rec[32:36] = [camera.width, camera.height, camera.near, camera.far]
+    """The camera record of ``camera`` (a paramlod Camera), float32 (CAMERA_FLOATS,)."""
+    rec = np.zeros(CAMERA.length, np.float32)
+    rec[CAMERA.slice("view")] = camera.view.reshape(-1)
+    rec[CAMERA.slice("proj")] = camera.projection.reshape(-1)
+    rec[CAMERA.offset("w")] = camera.width
+    rec[CAMERA.offset("h")] = camera.height
+    rec[CAMERA.offset("near")] = camera.near
+    rec[CAMERA.offset("far")] = camera.far
     return rec
+
+
+def vertex_format(record: Record, fields) -> str:
+    """The moderngl vertex format that reads ``fields`` (in record order) of a struct record as
+    vertex attributes and skips the rest, e.g. "4f 16x 4f 1u 12x" for range, ext, inst of a
+    RenderPatch."""
+    fields = list(fields)
+    names = [f.name for f in record.fields]
+    if [n for n in names if n in fields] != fields:
+        raise ValueError(f"fields {fields} are not fields of {record.name} in record order ({names})")
+    parts, skip = [], 0
+    for f in record.fields:
+        if f.name in fields:
+            if skip:
+                parts.append(f"{skip}x")
+                skip = 0
+            parts.append(f"{f.count}{_MODERNGL[f.type]}")
+        else:
+            skip += 4 * f.count
+    if skip:
+        parts.append(f"{skip}x")
+    return " ".join(parts)
+
+
+def _launch(glsl: bool) -> list[str]:
+    pre = "PL_" if glsl else ""
+    return [f"#define {pre}{c.name} {c.value}{'u' if glsl or c.unsigned else ''}   // {c.doc}" for c in LAUNCH]
+
+
+_BANNER = ("// ---- generated by paramlod.core.layouts.{0}(): the CPU<->GPU records (paramlod/core/layouts.py),\n"
+           "// the shading model (paramlod/core/shading.py){1}. Do not copy these by hand.")
+
+
+@lru_cache(maxsize=None)
+def cl_prelude() -> str:
+    """The OpenCL C prelude: every record's offsets, sizes, constants and structs, the shading
+    model's constants and the sRGB encoding table (made once: the same text for every program)."""
+    parts = [_BANNER.format("cl_prelude", " and the sRGB table (paramlod/core/color.py)")]
+    parts += [r.emit(glsl=False) for r in RECORDS]
+    parts.append("\n".join(["// launch constants", *_launch(False)]))
+    parts.append(shading.prelude(glsl=False))
+    parts.append(color.cl_tables())
+    parts.append("// ---- end of the prelude\n")
+    return "\n\n".join(parts)
+
+
+@lru_cache(maxsize=None)
+def glsl_prelude() -> str:
+    """The GLSL 4.50 prelude (after ``#version``): the same records with ``PL_`` names and ``u``
+    integers, their structs in std430-compatible form, and the shading model's constants."""
+    parts = [_BANNER.format("glsl_prelude", "")]
+    parts += [r.emit(glsl=True) for r in RECORDS]
+    parts.append("\n".join(["// launch constants", *_launch(True)]))
+    parts.append(shading.prelude(glsl=True))
+    parts.append("// ---- end of the prelude\n")
+    return "\n\n".join(parts)

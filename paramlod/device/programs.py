@@ -9,6 +9,7 @@ import numpy as np
 import pyopencl as cl
 
 from paramlod import kernels
+from paramlod.core.layouts import cl_prelude
 from paramlod.device.context import cl_device
 from paramlod.errors import FunctionError
 
@@ -36,10 +37,12 @@ def context_lines(src: str, log: str, pattern: str = CL_LINE, around: int = 3) -
 
 def build(files: list[str], defines: dict | None = None, options: tuple = (), generated: str = "",
           describe: str = "none"):
-    """Compile kernels/common/common.cl + ``generated`` + ``files`` (paths in kernels/);
+    """Compile the prelude (``paramlod.core.layouts.cl_prelude``: records, shading constants, sRGB
+    table) + kernels/common/common.cl + ``generated`` + ``files`` (paths in kernels/);
     ``options`` are extra compiler options; ``describe`` names the generated code's sources in
     the error a failed compile raises."""
-    src = "\n".join([kernels.source("common/common.cl"), generated, *(kernels.source(f) for f in files)])
+    src = "\n".join([cl_prelude(), kernels.source("common/common.cl"), generated,
+                      *(kernels.source(f) for f in files)])
     opts = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items())) + tuple(options)
     dev = cl_device()
     cache = dev.cache.setdefault("programs", {})

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod import kernels
+from paramlod.core.layouts import glsl_prelude
 from paramlod.device.context import gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import FunctionError
@@ -24,9 +25,10 @@ _target = None
 
 
 def _glsl_source(body: list[str], defines: dict | None = None) -> str:
-    """A GLSL 4.50 stage: ``#version``, the ``defines``, ``tess/tess_common.glsl``, then ``body``."""
+    """A GLSL 4.50 stage: ``#version``, the ``defines``, the records' prelude
+    (``paramlod.core.layouts.glsl_prelude``), ``tess/tess_common.glsl``, then ``body``."""
     head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in (defines or {}).items())
-    return head + "\n".join([kernels.source("tess/tess_common.glsl"), *body])
+    return head + "\n".join([glsl_prelude(), kernels.source("tess/tess_common.glsl"), *body])
 
 
 

@@ -1,11 +1,12 @@
-"""numpy mirrors of the patch records in kernels/common.cl."""
+"""The LOD stage's patch records on the host (declared in paramlod.core.layouts: EVAL_PATCH,
+RENDER_PATCH, the EvalPatch and RenderPatch structs of the kernels' prelude)."""
 import numpy as np
 
-EVAL_DTYPE = np.dtype([("range", "<f4", 4), ("inst", "<u4"), ("pad", "<u4", 3)])
-RENDER_DTYPE = np.dtype([("range", "<f4", 4), ("bbox", "<f4", 4), ("ext", "<f4", 4),
-                         ("inst", "<u4"), ("flags", "<u4"), ("pad", "<u4", 2)])
-FLAG_FORCED = 16
-assert EVAL_DTYPE.itemsize == 32 and RENDER_DTYPE.itemsize == 64
+from paramlod.core.layouts import EVAL_PATCH, RENDER_PATCH
+
+EVAL_DTYPE = EVAL_PATCH.dtype       # 32 bytes: range, inst, pad
+RENDER_DTYPE = RENDER_PATCH.dtype   # 64 bytes: range, bbox, ext, inst, flags, pad
+FLAG_FORCED = RENDER_PATCH.constant("FLAG_FORCED")   # RenderPatch.flags bit: forced out at the last step
 
 
 def initial_patches(domains: np.ndarray, grid=(1, 1)) -> np.ndarray:

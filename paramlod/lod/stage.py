@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
+from paramlod.core.layouts import LOD_COUNTER, constant
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, SceneError
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, initial_patches
@@ -55,10 +56,12 @@ class _Buffer:
         return True
 
 
-LOD_COUNTERS = 8  # per-step counter record in kernels/lod.cl
-C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED = range(5)
-LOD_RENDER_TOTAL = 1  # counters[0, 1]: the render list's length (kernels/lod.cl)
-LOD_LOCAL = 32        # work-items measuring one patch together (kernels/lod.cl)
+# the per-step counter record (paramlod.core.layouts.LOD_COUNTER; LOD_* in the kernels' prelude)
+LOD_COUNTERS = LOD_COUNTER.length
+C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED = (
+    LOD_COUNTER.offset(f) for f in ("children", "split", "culled", "rendered", "forced"))
+LOD_RENDER_TOTAL = LOD_COUNTER.constant("LOD_RENDER_TOTAL")   # counters[0, 1]: the render list's length
+LOD_LOCAL = constant("LOD_LOCAL")   # work-items measuring one patch together (kernels/lod/lod.cl)
 
 
 class LodStage:

@@ -16,6 +16,7 @@ class SceneState:
         self._plan_key = None
         self.passes = []
         self.subscenes: dict = {}      # Group -> its subscene
+        self._by_group: dict = {}      # Group -> its renderer state, for the current plan
         self._renderers: dict = {}     # (variant, functions) -> renderer state
         self._keys: dict = {}          # (w, h, ss) -> KeyBuffer
         self._downsample: dict = {}    # ss -> Downsample
@@ -27,13 +28,22 @@ class SceneState:
             self.passes = plan(scene, variant, settings)
             self.subscenes = {g: scene.subscene(*((g.objects, ()) if g.spec.kind != "surfels" else ((), g.objects)))
                               for p in self.passes for g in p.groups}
+            self._by_group = {}
             self._plan_key = key
         for sub in self.subscenes.values():
             sub.time = scene.time
         return self.passes
 
     def renderer(self, group, record: bool = False):
-        """The renderer state that draws ``group`` (made on first use)."""
+        """The renderer state that draws ``group`` (made on first use, then kept for the plan)."""
+        state = self._by_group.get(group) if not record else None
+        if state is None:
+            state = self._renderer_for(group, record)
+            if not record:
+                self._by_group[group] = state
+        return state
+
+    def _renderer_for(self, group, record):
         functions = tuple(self.subscenes[group].functions())
         key = (group.spec.variant, functions, record)
         state = self._renderers.get(key)

@@ -1,10 +1,11 @@
-"""The shading model's host-side constants, shared by every renderer (the point kernels'
-``shade()`` in kernels/common/keys.cl and the tessellation fragment shader read the same
-record): a key light in view space and the ambient share."""
+"""The shading model as the renderers see it (the kit): the light record ``LIGHT`` (towards the
+light in view space, ambient share) that every renderer uploads, and the constants it is made of.
+Declared once in ``paramlod.core.shading`` (the preludes of the OpenCL and GLSL sources are
+emitted from there, below the renderers); the one shading body is kernels/common/shading.cl,
+included by the point kernels' ``shade()`` (kernels/common/keys.cl) and the tessellation
+fragment shader."""
 from __future__ import annotations
 
-import numpy as np
+from paramlod.core.shading import AMBIENT, LIGHT, LIGHT_TOWARDS, SPECULAR_EXPONENT
 
-# towards the light: upper left, in front; the fourth value is the ambient share
-_TOWARDS = np.array([-0.35, 0.5, 1.0])
-LIGHT = np.array([*(_TOWARDS / np.linalg.norm(_TOWARDS)), 0.12], np.float32)
+__all__ = ["AMBIENT", "LIGHT", "LIGHT_TOWARDS", "SPECULAR_EXPONENT"]

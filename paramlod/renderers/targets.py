@@ -37,6 +37,9 @@ class KeyBuffer:
         self._counts = np.zeros(2, np.uint32)
         self._frame = None   # the lazy Frame reading the resolved arrays (weak)
         self.background = None
+        # pinned host arrays the resolved arrays are copied through: a copy from pageable memory
+        # measured 0.35 GB/s on an H200 (17 ms for a 1080p image)
+        self._staging: dict[int, np.ndarray] = {}
 
     @property
     def pixel_count(self) -> int:
@@ -80,7 +83,7 @@ class KeyBuffer:
         n = self.pixel_count
         if self._resolve is None:   # a supersampled buffer is only downsampled, never resolved
             ctx = cl_device().context
-            self._out = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4, 4)]
+            self._out = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4, 3)]
             self._count_buf = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 8)
             lin, thr = srgb_device_tables()
             # this buffer's own kernel object, its arguments set once but for the background
@@ -88,9 +91,11 @@ class KeyBuffer:
                                             defines={"PL_SS_COUNT": self.ss * self.ss}), "resolve")
             self._resolve.set_args(self.color, self.aux, np.uint32(n), *self._out, np.uint32(0), lin.data,
                                    thr.data, self._count_buf)
-        self.background = tuple(float(x) for x in background)
-        bg = linear_to_srgb8(np.asarray(self.background, np.float32)).astype(np.uint32)
-        self._resolve.set_arg(8, np.uint32((bg[0] << 24) | (bg[1] << 16) | (bg[2] << 8) | 255))
+        background = tuple(float(x) for x in background)
+        if background != self.background:
+            bg = linear_to_srgb8(np.asarray(background, np.float32)).astype(np.uint32)
+            self._resolve.set_arg(8, np.uint32((bg[0] << 24) | (bg[1] << 16) | (bg[2] << 8) | 255))
+            self.background = background
         q = cl_device().queue
         cl.enqueue_fill_buffer(q, self._count_buf, np.uint32(0), 0, 8)
         return launch(q, self._resolve, ((n + 255) // 256 * 256,), (256,))
@@ -103,6 +108,17 @@ class KeyBuffer:
     def counts(self) -> dict:
         """{"pixels_written", "covered_subsamples"} of the last resolve (after the frame's wait)."""
         return {"pixels_written": int(self._counts[0]), "covered_subsamples": int(self._counts[1])}
+
+    def staging(self, slot: int, shape, dtype) -> np.ndarray:
+        """A pinned host array (mapped once, kept) for reading resolved array ``slot``."""
+        arr = self._staging.get(slot)
+        if arr is None:
+            nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+            buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, nbytes)
+            arr, _ = cl.enqueue_map_buffer(cl_device().queue, buf, cl.map_flags.READ | cl.map_flags.WRITE, 0,
+                                           shape, dtype)
+            arr = self._staging[slot] = arr   # the mapped array holds its buffer
+        return arr
 
     def frame(self, background=None) -> Frame:
         """A Frame that reads the last resolve lazily (valid until these keys are cleared, when it
@@ -117,7 +133,7 @@ class _ResolvedArrays:
     """Reads one resolved array of a KeyBuffer on request (a Frame's device source)."""
 
     _SLOTS = {"color": (0, np.float32, 4), "depth": (1, np.float32, 0), "normal": (2, np.float32, 4),
-              "object_id": (3, np.uint32, 0), "image": (4, np.uint8, 4)}
+              "object_id": (3, np.uint32, 0), "image": (4, np.uint8, 3)}
 
     def __init__(self, keys: KeyBuffer):
         self.keys, self.background = keys, keys.background
@@ -126,13 +142,9 @@ class _ResolvedArrays:
         k = self.keys
         slot, dtype, channels = self._SLOTS[name]
         shape = (k.height, k.width, channels) if channels else (k.height, k.width)
-        out = np.empty(shape, dtype)
-        cl.enqueue_copy(cl_device().queue, out, k._out[slot])
-        if name == "normal":
-            return np.ascontiguousarray(out[..., :3])
-        if name == "image":
-            return np.ascontiguousarray(out[..., :3])
-        return out
+        staged = k.staging(slot, shape, dtype)
+        cl.enqueue_copy(cl_device().queue, staged, k._out[slot])
+        return np.array(staged[..., :3] if name == "normal" else staged)
 
 
 def srgb_device_tables():

@@ -30,6 +30,7 @@ import numpy as np
 from paramlod import kernels
 from paramlod.core.camera import Camera
 from paramlod.core.frame import Frame
+from paramlod.core.layouts import RENDER_PATCH, glsl_prelude, vertex_format
 from paramlod.device.context import cl_device, gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import DeviceError, FunctionError, SceneError
@@ -47,6 +48,9 @@ MAX_LEVEL = 64.0
 # llvmpipe: worst-case generated vertices per draw call (see TessRenderer.patches_per_draw)
 LLVMPIPE_VERTEX_BUDGET = 60000
 SPACINGS = {"equal": "equal_spacing", "fractional_odd": "fractional_odd_spacing"}
+# the render list's records as vertex attributes: range, ext and inst of each RenderPatch
+PATCH_ATTRIBUTES = ("range", "ext", "inst")
+PATCH_FORMAT = vertex_format(RENDER_PATCH, PATCH_ATTRIBUTES)   # "4f 16x 4f 1u 12x"
 
 
 # --- settings -----------------------------------------------------------------------------------
@@ -93,8 +97,9 @@ class TessSettings:
 
 # --- shader programs ----------------------------------------------------------------------------
 def _stage(defines: dict, body: list[str]) -> str:
+    """A GLSL stage: ``#version``, the ``defines``, the records' prelude, tess_common.glsl, ``body``."""
     head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
-    return head + "\n".join([kernels.source("tess/tess_common.glsl"), *body])
+    return head + "\n".join([glsl_prelude(), kernels.source("tess/tess_common.glsl"), *body])
 
 
 def _program(ctx, stages: dict, functions) -> object:
@@ -289,7 +294,7 @@ class TessRenderer:
             for k in [k for k in self._vaos if k[0] == id(prog)]:  # made for a released buffer
                 self._vaos.pop(k).release()
             vao = self._vaos[key] = self.ctx.vertex_array(
-                prog, [(self._patches.buf, "4f 16x 4f 1u 12x", "in_range", "in_ext", "in_inst")])
+                prog, [(self._patches.buf, PATCH_FORMAT, *(f"in_{a}" for a in PATCH_ATTRIBUTES))])
         return vao
 
     def draw(self, render_list: np.ndarray, n: int | None, scene: Scene, camera: Camera,

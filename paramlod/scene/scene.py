@@ -17,13 +17,14 @@ from paramlod.errors import FunctionError, SceneError
 from paramlod.function.define import ParametricFunction
 from paramlod.function.registry import get_function
 from paramlod.scene.loaders import load
+from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
 from paramlod.core.transforms import matrix as _as_matrix
 
-# Per-instance float record (see kernels/common.cl, INST_* offsets): 4x4 model matrix (row-major),
-# 3x4 normal matrix rows, domain (u0, u1, v0, v1).
-INST_FLOATS = 32
-# Per-instance uint record: function index, parameter-block offset, object id, flags.
-INST_UINTS = 4
+# Per-instance float record (paramlod.core.layouts.INSTANCE_F, INST_* in the kernels' prelude):
+# 4x4 model matrix (row-major), 3x4 normal matrix rows, domain (u0, u1, v0, v1).
+INST_FLOATS = INSTANCE_F.length
+# Per-instance uint record (INSTANCE_U): function index, parameter-block offset, object id, flags.
+INST_UINTS = INSTANCE_U.length
 MAX_OBJECTS = 4095   # object ids are carried in 12 bits of the aux key (docs/frame.md)
 MAX_PART_DEPTH = 4
 _versions = itertools.count(1)

@@ -101,13 +101,14 @@ def test_nan_samples_are_dropped_and_counted():
 
 
 def test_srgb_encoding_table_rounds_the_srgb_curve():
-    """keys.cl encodes colour by searching SRGB8_THRESHOLDS; the table must give the code that
-    rounding the exact sRGB curve gives (checked away from the code boundaries)."""
+    """keys.cl encodes colour by searching SRGB8_THRESHOLDS (emitted into the OpenCL prelude by
+    paramlod.core.color); the table must give the code that rounding the exact sRGB curve gives
+    (checked away from the code boundaries)."""
     import re
 
-    from paramlod import kernels
+    from paramlod.core.layouts import cl_prelude
 
-    src = kernels.source("common/keys.cl")
+    src = cl_prelude()
     body = src[src.index("SRGB8_THRESHOLDS[256] = {"):]
     t = np.array([float(x) for x in re.findall(r"-?\d+\.\d+(?:e-?\d+)?", body[:body.index("};")])])
     assert len(t) == 256
