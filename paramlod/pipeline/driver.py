@@ -83,7 +83,6 @@ class Pipeline:
         t0 = time.perf_counter()
         ss = p.ss
         frame_keys = st.keys(camera.size, ss)
-        frame_keys.release_frame()
         if ss > 1:
             target, cam = st.subsample_keys(camera.size, ss), camera.with_size((camera.width * ss, camera.height * ss))
         else:
@@ -101,11 +100,13 @@ class Pipeline:
                 r.enqueue(target, settings)
             downsampled = st.downsample(ss).enqueue(target, frame_keys) if ss > 1 else None
             resolved = frame_keys.resolve_on_device(scene.background)
+            host += time.perf_counter() - t1
+            # the counter copies: into pageable memory NVIDIA's driver waits for them, so they and
+            # the finish are the frame's one wait
             for g, r in drawn:
                 r.collect()
             frame_keys.read_counts()
-            host += time.perf_counter() - t1
-            q.finish()   # the frame's one wait
+            q.finish()
             if not any([r.grow(settings) for _, r in drawn]):
                 break
         t_end = time.perf_counter()
@@ -126,7 +127,7 @@ class Pipeline:
         ms.update(upload=(t_upload - t0) * 1e3, resolve=_event_ms(resolved) + _event_ms(downsampled),
                   host=(t_upload - t0 + host) * 1e3, frame=(t_end - t0) * 1e3, readback=0.0,
                   total=(t_end - t0) * 1e3)
-        frame = frame_keys.frame(scene.background)
+        frame = frame_keys.frame()
         frame.stats = FrameStats(stats)
         return frame
 

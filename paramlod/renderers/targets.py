@@ -24,7 +24,9 @@ class KeyBuffer:
     resolved, the Frame arrays, the 8-bit image and the frame's counters on the device.
 
     ``ss``: subsamples per pixel side the keys' alpha stands for (the resolve counts covered
-    subsamples with it)."""
+    subsamples with it). Each resolve writes into a set of output buffers that the Frame made from
+    it keeps until it is dropped: a frame still alive when the next one is drawn (``f = render(...)``
+    in a loop) keeps its own arrays without copying them, at the cost of device memory."""
 
     def __init__(self, width: int, height: int, ss: int = 1):
         self.width, self.height, self.ss = int(width), int(height), int(ss)
@@ -32,12 +34,11 @@ class KeyBuffer:
         ctx = cl_device().context
         self.color = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self.aux = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
-        self._out = None   # the resolved arrays on the device: made by the first resolve
-        self._resolve = None
+        self._free: list[_Outputs] = []   # output sets no Frame holds
+        self._last: _Outputs | None = None
+        self._count_buf = None
         self._counts = np.zeros(2, np.uint32)
-        self._frame = None   # the lazy Frame reading the resolved arrays (weak)
-        self.background = None
-        # pinned host arrays the resolved arrays are copied through: a copy from pageable memory
+        # pinned host arrays the resolved arrays are copied through: a copy into pageable memory
         # measured 0.35 GB/s on an H200 (17 ms for a 1080p image)
         self._staging: dict[int, np.ndarray] = {}
 
@@ -46,19 +47,11 @@ class KeyBuffer:
         return self.width * self.height
 
     def clear(self):
-        """Clear the keys to all ones; a lazy Frame still reading the last resolve copies its
-        arrays first."""
-        self.release_frame()
+        """Clear the keys to all ones."""
         q = cl_device().queue
         ones = np.uint64(0xFFFFFFFFFFFFFFFF)
         cl.enqueue_fill_buffer(q, self.color, ones, 0, self.pixel_count * 8)
         cl.enqueue_fill_buffer(q, self.aux, ones, 0, self.pixel_count * 8)
-
-    def release_frame(self):
-        frame = self._frame() if self._frame is not None else None
-        if frame is not None:
-            frame.materialize()
-        self._frame = None
 
     def read_keys(self) -> tuple[np.ndarray, np.ndarray]:
         """The raw colour and aux keys, uint64 (h, w) each."""
@@ -74,31 +67,21 @@ class KeyBuffer:
         self.resolve_on_device(background)
         self.read_counts()
         cl_device().queue.finish()
-        return self.frame(background)
+        return self.frame()
 
     def resolve_on_device(self, background=(0.0, 0.0, 0.0)):
         """Enqueue the decode of the keys into colour, depth, normal, id and image buffers and the
         counters on the device (returns the kernel's event). ``background``: linear RGB the image
-        is composited over."""
-        n = self.pixel_count
-        if self._resolve is None:   # a supersampled buffer is only downsampled, never resolved
-            ctx = cl_device().context
-            self._out = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4, 3)]
-            self._count_buf = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 8)
-            lin, thr = srgb_device_tables()
-            # this buffer's own kernel object, its arguments set once but for the background
-            self._resolve = cl.Kernel(build(["common/keys.cl", "points/subsamples.cl", "points/resolve.cl"],
-                                            defines={"PL_SS_COUNT": self.ss * self.ss}), "resolve")
-            self._resolve.set_args(self.color, self.aux, np.uint32(n), *self._out, np.uint32(0), lin.data,
-                                   thr.data, self._count_buf)
-        background = tuple(float(x) for x in background)
-        if background != self.background:
-            bg = linear_to_srgb8(np.asarray(background, np.float32)).astype(np.uint32)
-            self._resolve.set_arg(8, np.uint32((bg[0] << 24) | (bg[1] << 16) | (bg[2] << 8) | 255))
-            self.background = background
+        is composited over. A supersampled buffer is only downsampled, never resolved."""
+        if self._count_buf is None:
+            self._count_buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8)
+        out = self._free.pop() if self._free else _Outputs(self)
+        out.set_background(background)
+        self._last = out
         q = cl_device().queue
         cl.enqueue_fill_buffer(q, self._count_buf, np.uint32(0), 0, 8)
-        return launch(q, self._resolve, ((n + 255) // 256 * 256,), (256,))
+        n = self.pixel_count
+        return launch(q, out.kernel, ((n + 255) // 256 * 256,), (256,))
 
     def read_counts(self):
         """Enqueue the copy of the resolve's counters (read after the frame's wait: ``counts``)."""
@@ -117,33 +100,58 @@ class KeyBuffer:
             buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, nbytes)
             arr, _ = cl.enqueue_map_buffer(cl_device().queue, buf, cl.map_flags.READ | cl.map_flags.WRITE, 0,
                                            shape, dtype)
-            arr = self._staging[slot] = arr   # the mapped array holds its buffer
+            self._staging[slot] = arr   # the mapped array holds its buffer
         return arr
 
     def frame(self, background=None) -> Frame:
-        """A Frame that reads the last resolve lazily (valid until these keys are cleared, when it
-        copies what it has not read yet)."""
-        frame = Frame(source=_ResolvedArrays(self), size=(self.width, self.height),
-                      background=self.background if background is None else background)
-        self._frame = weakref.ref(frame)
+        """A Frame that reads the last resolve lazily; its output buffers return to this key
+        buffer when the Frame is dropped."""
+        out, self._last = self._last, None
+        if out is None:
+            raise ValueError("KeyBuffer.frame: resolve_on_device first (each resolve makes one Frame)")
+        frame = Frame(source=_ResolvedArrays(self, out), size=(self.width, self.height),
+                      background=out.background if background is None else background)
+        weakref.finalize(frame, self._free.append, out)
         return frame
 
 
+class _Outputs:
+    """One set of resolved arrays on the device, with the resolve kernel bound to it."""
+
+    def __init__(self, keys: KeyBuffer):
+        n = keys.pixel_count
+        ctx = cl_device().context
+        self.bufs = [cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, n * s) for s in (16, 4, 16, 4, 3)]
+        lin, thr = srgb_device_tables()
+        self.kernel = cl.Kernel(build(["common/keys.cl", "points/subsamples.cl", "points/resolve.cl"],
+                                      defines={"PL_SS_COUNT": keys.ss * keys.ss}), "resolve")
+        self.kernel.set_args(keys.color, keys.aux, np.uint32(n), *self.bufs, np.uint32(0), lin.data, thr.data,
+                             keys._count_buf)
+        self.background = None
+
+    def set_background(self, background):
+        background = tuple(float(x) for x in background)
+        if background != self.background:
+            bg = linear_to_srgb8(np.asarray(background, np.float32)).astype(np.uint32)
+            self.kernel.set_arg(8, np.uint32((bg[0] << 24) | (bg[1] << 16) | (bg[2] << 8) | 255))
+            self.background = background
+
+
 class _ResolvedArrays:
-    """Reads one resolved array of a KeyBuffer on request (a Frame's device source)."""
+    """Reads one resolved array of a KeyBuffer's output set on request (a Frame's device source)."""
 
     _SLOTS = {"color": (0, np.float32, 4), "depth": (1, np.float32, 0), "normal": (2, np.float32, 4),
               "object_id": (3, np.uint32, 0), "image": (4, np.uint8, 3)}
 
-    def __init__(self, keys: KeyBuffer):
-        self.keys, self.background = keys, keys.background
+    def __init__(self, keys: KeyBuffer, out: _Outputs):
+        self.keys, self.out, self.background = keys, out, out.background
 
     def read(self, name: str) -> np.ndarray:
         k = self.keys
         slot, dtype, channels = self._SLOTS[name]
         shape = (k.height, k.width, channels) if channels else (k.height, k.width)
         staged = k.staging(slot, shape, dtype)
-        cl.enqueue_copy(cl_device().queue, staged, k._out[slot])
+        cl.enqueue_copy(cl_device().queue, staged, self.out.bufs[slot])
         return np.array(staged[..., :3] if name == "normal" else staged)
 
 

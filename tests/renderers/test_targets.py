@@ -42,9 +42,21 @@ def test_a_frame_keeps_its_arrays_when_the_buffers_are_reused():
     far = pl.Camera.look_at((0, 2, 6), (0, 0, 0), size=(64, 48))
     first = pl.render(scene, near)
     assert first.on_device                       # nothing read yet
-    second = pl.render(scene, far)               # same key buffers: the first frame copies first
-    assert not first.on_device
+    second = pl.render(scene, far)               # same key buffers, other output buffers
+    assert first.on_device and second.on_device
     again = pl.render(scene, near).materialize()
     np.testing.assert_array_equal(first.depth, again.depth)
     np.testing.assert_array_equal(first.object_id, again.object_id)
     assert np.isfinite(second.depth).sum() < np.isfinite(first.depth).sum()
+
+
+def test_output_buffers_are_reused_once_a_frame_is_dropped():
+    scene = _scene()
+    cam = pl.Camera.look_at((0, 1, 3), (0, 0, 0), size=(64, 48))
+    keys = None
+    for _ in range(4):
+        frame = pl.render(scene, cam)   # the previous frame is dropped when this one is bound
+        keys = scene_state(scene).keys(cam.size)
+    assert len(keys._free) == 1         # two sets in all: the live frame's and one free
+    del frame
+    assert len(keys._free) == 2
