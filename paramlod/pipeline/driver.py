@@ -68,7 +68,7 @@ class Pipeline:
             if p.target == "gl":
                 frames.append(self._gl_pass(st, p, camera, settings))
             else:
-                frames.append(self._keys_pass(st, p, scene, camera, settings, variant))
+                frames.append(self._keys_pass(st, p, scene, camera, settings))
         return frames
 
     def _gl_pass(self, st, p, camera, settings):
@@ -79,7 +79,7 @@ class Pipeline:
         r.prepare(st.subscenes[group], camera, settings)
         return r.enqueue(camera, settings)
 
-    def _keys_pass(self, st, p, scene, camera, settings, variant):
+    def _keys_pass(self, st, p, scene, camera, settings):
         t0 = time.perf_counter()
         ss = p.ss
         frame_keys = st.keys(camera.size, ss)

@@ -34,21 +34,17 @@ class SceneState:
             sub.time = scene.time
         return self.passes
 
-    def renderer(self, group, record: bool = False):
-        """The renderer state that draws ``group`` (made on first use, then kept for the plan)."""
-        state = self._by_group.get(group) if not record else None
+    def renderer(self, group):
+        """The renderer state that draws ``group``: made on first use and kept for the plan; a new
+        plan reuses the state of a group of the same variant and functions (programs, LOD buffers)."""
+        state = self._by_group.get(group)
         if state is None:
-            state = self._renderer_for(group, record)
-            if not record:
-                self._by_group[group] = state
-        return state
-
-    def _renderer_for(self, group, record):
-        functions = tuple(self.subscenes[group].functions())
-        key = (group.spec.variant, functions, record)
-        state = self._renderers.get(key)
-        if state is None:
-            state = self._renderers[key] = group.spec.factory(list(functions), record=record)
+            functions = tuple(self.subscenes[group].functions())
+            key = (group.spec.variant, functions)
+            state = self._renderers.get(key)
+            if state is None:
+                state = self._renderers[key] = group.spec.factory(list(functions))
+            self._by_group[group] = state
         return state
 
     def renderer_states(self) -> list:
