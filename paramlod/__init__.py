@@ -1,11 +1,12 @@
-"""paramlod: parametric objects and surfels rendered with per-frame level of detail."""
-from paramlod import dsl, surfels  # noqa: F401  (surfels registers its object kind and renderer)
+"""paramlod: parametric objects, meshes and surfels rendered with per-frame level of detail."""
+from paramlod import dsl, meshlod, surfels  # noqa: F401  (meshlod and surfels register their object kinds and renderers)
 from paramlod.core.camera import Camera
 from paramlod.core.frame import Frame, FrameStats
 from paramlod.core.transforms import matrix, rotate, scale, translate
 from paramlod.errors import CapacityError, DeviceError, FunctionError, ParamlodError, SceneError
 from paramlod.function.define import ParametricFunction, Part, evaluate, parametric
 from paramlod.lod.stage import LodSettings
+from paramlod.meshlod import MeshLod, MeshSettings, load_mesh
 from paramlod.pipeline.driver import render, render_on_device
 from paramlod.pipeline.settings import RenderSettings
 from paramlod.renderers.points_lfb import SsaaSettings
@@ -19,4 +20,5 @@ __all__ = [
     "ParametricFunction", "Part", "dsl", "evaluate", "parametric", "Camera", "Material", "Scene",
     "matrix", "rotate", "scale", "translate", "Frame", "FrameStats", "LodSettings", "PointSettings",
     "SsaaSettings", "TessSettings", "RenderSettings", "render", "render_on_device", "variants",
+    "MeshLod", "MeshSettings", "load_mesh",
 ]

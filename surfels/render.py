@@ -289,7 +289,7 @@ def render_surfels(path_or_set, camera=None, strategy=None, size=(512, 512), tra
     return frame
 
 
-register_kind(ObjectKind("surfels", lambda scene: scene.surfels, "surfels"))
+register_kind(ObjectKind("surfels", "surfels", "surfels"))
 register_renderer(RendererSpec("surfels", "surfels", SurfelSplats, "points", "keys", object,
                                "prefixes of blue-surfel sets splatted with atom_min into the key buffers"))
 register_loader("surfels", load_surfels)

@@ -87,6 +87,20 @@ def pytest_addoption(parser):
                      help="rewrite the stored reference images in tests/refs/ instead of comparing")
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _mesh_cache(tmp_path_factory):
+    """Mesh builds cached in a folder of this run, never in the user's ~/.cache."""
+    import os
+
+    old = os.environ.get("PARAMLOD_CACHE")
+    os.environ["PARAMLOD_CACHE"] = str(tmp_path_factory.mktemp("paramlod-cache"))
+    yield
+    if old is None:
+        os.environ.pop("PARAMLOD_CACHE", None)
+    else:
+        os.environ["PARAMLOD_CACHE"] = old
+
+
 @pytest.fixture(scope="session")
 def regen_refs(request):
     """None when comparing; with --regen-refs, a list the reference tests add each file they

@@ -39,7 +39,7 @@ ALLOWED = {
     # plugins see the public API only (and each other)
     "functions": {"public", "dsl", "errors", "functions", "dmri.sh"},
 }
-KIT = {"registry", "targets", "aa", "shading", "sampling"}   # what a renderer may import from renderers/
+KIT = {"registry", "targets", "gl_targets", "aa", "shading", "sampling"}   # what a renderer may import from renderers/
 
 
 def modules() -> dict[str, Path]:

@@ -1,4 +1,4 @@
-"""Command line: ``paramlod render | info | functions | bench | gallery | surfels | glyphs``."""
+"""Command line: ``paramlod render | info | functions | bench | gallery | surfels | mesh | glyphs``."""
 from __future__ import annotations
 
 import argparse
@@ -6,7 +6,7 @@ import json
 import sys
 from pathlib import Path
 
-from paramlod.app import gallery, glyphs, surfels_cmd
+from paramlod.app import gallery, glyphs, mesh_cmd, surfels_cmd
 from paramlod.app.args import add_output, add_size, add_stats, run_reporting_errors
 from paramlod.app.bench import run as bench
 from paramlod.app.scenefile import load_scene
@@ -22,8 +22,8 @@ def cmd_render(args) -> int:
     if args.aa:
         variant = args.variant or (None if sf.object_variants else sf.variant)
         sf.settings.apply_aa(args.aa, points_only=variant == "points")
-    if args.variant:   # --variant draws every object with it
-        for obj in sf.scene.objects:
+    if args.variant:   # --variant draws every object with it (meshes with the mesh variant that goes with it)
+        for obj in [*sf.scene.objects, *sf.scene.meshes]:
             obj.variant = obj.aa = None
         sf.scene.touch()
     variant = args.variant or sf.variant
@@ -83,7 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scene", help="scene file (.toml)")
     add_output(r, required=False, default_help="default out/<scene>.png")
     add_size(r, what="override the camera size")
-    r.add_argument("--variant", help="override the render variant: points, points-ssaa or tess")
+    r.add_argument("--variant", help="override the render variant: points, points-ssaa or tess (meshes follow: "
+                   "meshlets, or meshlets-gl with tess), or meshlets / meshlets-gl for the meshes")
     r.add_argument("--aa", help="anti-aliasing: noAA, msaa2/4/8, ssaa2x2/3x3/4x4, or a combination such "
                                 "as 4xSS+8xMS (tess); the points variant takes the supersampling only")
     add_stats(r)
@@ -104,6 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.set_defaults(func=gallery.run_gallery)
 
     surfels_cmd.add_subparser(sub)
+    mesh_cmd.add_subparser(sub)
     glyphs.add_subparser(sub)
     return p
 

@@ -1,8 +1,10 @@
 """TOML scene files: objects, camera and render settings, validated with messages that name the
-field and its line. Format: docs/scene-format.md."""
+field and its line. Format: docs/scene-format.md. Driven by ``paramlod render`` and the gallery.
+Scene files are data: the only code they name is an instance builder (an importable module:function)."""
 from __future__ import annotations
 
 import importlib
+import math
 import re
 import tomllib
 from dataclasses import dataclass
@@ -10,14 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from paramlod import dmri
+from paramlod import dmri, meshlod  # noqa: F401  (meshlod registers the "mesh" loader and renderers)
 from paramlod.app.args import MAX_SIDE
 from paramlod.core.camera import Camera
 from paramlod.core.transforms import matrix as as_matrix, rotate, scale, translate
-from paramlod.errors import ParamlodError, SceneError
+from paramlod.errors import MeshError, ParamlodError, SceneError
 from paramlod.lod.stage import LodSettings
 from paramlod.pipeline.settings import RenderSettings
-from paramlod.renderers.registry import variants
+from paramlod.renderers.registry import KINDS, variants
 from paramlod.renderers.points import PointSettings
 from paramlod.renderers.tess import TessSettings
 from paramlod.scene.framing import framing_camera
@@ -27,9 +29,11 @@ from paramlod.surfels.render import FixedCount, FixedSize
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation"}
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches",
-               "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod"}
+               "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "translate", "rotate", "scale", "matrix", "variant",
-               "instances", "sh_field", "surfels"}
+               "instances", "sh_field", "surfels", "mesh", "lod"}
+SOURCE_KEYS = ("function", "mesh", "surfels", "sh_field")   # what an object is made of: one of them
+MESH_LODS = ("dag", "full")
 ANIMATION_KEYS = {"frames", "t0", "t1", "fps"}
 
 
@@ -136,8 +140,8 @@ def load_scene(path, size=None) -> SceneFile:
     ck.unknown(r, RENDER_KEYS, "render", "render")
     VARIANTS = variants("parametric")
     variant = r.get("variant", "points")
-    if variant not in VARIANTS:
-        ck.fail("render.variant", f"unknown variant {variant!r} (available: {', '.join(VARIANTS)})", "render", None, "variant")
+    if variant not in variants():   # the frame's variant: for the objects of its kind
+        ck.fail("render.variant", f"unknown variant {variant!r} (available: {', '.join(variants())})", "render", None, "variant")
     th = r.get("threshold", 84.0)
     if isinstance(th, (int, float)) and not isinstance(th, bool):
         th = [th, th]
@@ -154,6 +158,14 @@ def load_scene(path, size=None) -> SceneFile:
         points=PointSettings(density=ck.num(r, "density", "render", "render", default=PointSettings.density, lo=0.1, hi=16)))
     background = ck.vec(r, "background", 3, "render", "render", default=[0.12, 0.12, 0.14])
     settings.tess = _tess_settings(r, ck)
+    settings.mesh.threshold_px = ck.num(r, "mesh_threshold", "render", "render", default=settings.mesh.threshold_px,
+                                        lo=0, hi=1e6)
+    if "mesh_color_by" in r:
+        settings.mesh.color_by = r["mesh_color_by"]
+        try:
+            settings.mesh.validate()
+        except ParamlodError as exc:
+            ck.fail("render.mesh_color_by", str(exc), "render", None, "mesh_color_by")
 
     scene = Scene(background=background)
     objects = data.get("objects", [])
@@ -161,21 +173,40 @@ def load_scene(path, size=None) -> SceneFile:
         ck.fail("objects", "the scene needs at least one [[objects]] table", "objects")
     for i, o in enumerate(objects):
         where = f"objects[{i}]"
+        if not isinstance(o, dict):
+            ck.fail(where, "must be a table [[objects]]", "objects", i)
         ck.unknown(o, OBJECT_KEYS, where, "objects", i)
-        if not {"sh_field", "surfels"} & set(o) and ("function" not in o or not isinstance(o["function"], str)):
-            ck.fail(f"{where}.function", "is required (a function name, see `paramlod functions`)", "objects", i)
+        sources = [k for k in SOURCE_KEYS if k in o]
+        if len(sources) > 1:
+            ck.fail(f"{where}.{sources[1]}", f"an object is one of {', '.join(SOURCE_KEYS)}; it has both "
+                    f"{sources[0]} and {sources[1]}", "objects", i, sources[1])
+        if not {"sh_field", "surfels", "mesh"} & set(o) and ("function" not in o or not isinstance(o["function"], str)):
+            ck.fail(f"{where}.function", "is required (a function name, see `paramlod functions`; "
+                    "or mesh = \"file.ply\")", "objects", i)
         params = o.get("params", {})
         if not isinstance(params, dict):
             ck.fail(f"{where}.params", "must be a table of name = value", "objects", i, "params")
+        if "mesh" in o:
+            _check_mesh_keys(o, ck, where, i)
+        elif "lod" in o:
+            ck.fail(f"{where}.lod", "is for mesh objects (mesh = \"file.ply\")", "objects", i, "lod")
         ov = o.get("variant")
-        if ov is not None and not (ov in VARIANTS or (isinstance(ov, str) and ov.startswith("tess:"))):
+        if ov is not None and "mesh" in o:
+            MESH_VARIANTS = variants("mesh")
+            if not (isinstance(ov, str) and ov.partition(":")[0] in MESH_VARIANTS):
+                ck.fail(f"{where}.variant", f"unknown variant {ov!r} for a mesh (available: "
+                        f"{', '.join(MESH_VARIANTS) or 'none registered'}, or '<variant>:<AA mode>')",
+                        "objects", i, "variant")
+        elif ov is not None and not (ov in VARIANTS or (isinstance(ov, str) and ov.startswith("tess:"))):
             ck.fail(f"{where}.variant", f"unknown variant {ov!r} (available: {', '.join(VARIANTS)}, "
                     "or 'tess:<AA mode>')", "objects", i, "variant")
         try:
             m = _transform(o, ck, where, i)
             mat = Material(color=tuple(ck.vec(o, "color", 3, where, "objects", i, default=[0.8, 0.8, 0.8])),
                            specular=ck.num(o, "specular", where, "objects", i, default=0.25, lo=0, hi=1))
-            if "surfels" in o:
+            if "mesh" in o:
+                _add_mesh(scene, o, path, m, mat, ck, where, i)
+            elif "surfels" in o:
                 _add_surfels(scene, o["surfels"], path, m, mat, ck, where, i)
             elif "sh_field" in o:
                 _add_sh_field(scene, o["sh_field"], path, m, mat, ck, where, i)
@@ -183,10 +214,12 @@ def load_scene(path, size=None) -> SceneFile:
                 _add_instances(scene, o, params, path, m, mat, ck, where, i)
             else:
                 scene.add(o["function"], params=params, transform=m, material=mat)
-            if ov is not None and "surfels" not in o:   # the object's own renderer and AA mode
+            if ov is not None and not {"surfels", "mesh"} & set(o):   # the object's own renderer and AA mode
                 obj = scene.objects[-1]
                 obj.variant, _, aa = ov.partition(":")
                 obj.aa = aa or None
+        except MeshError as exc:   # the mesh file: its message names it
+            ck.fail(f"{where}.mesh", str(exc), "objects", i, "mesh")
         except SceneError as exc:
             if str(exc).startswith(str(path)):
                 raise
@@ -195,7 +228,8 @@ def load_scene(path, size=None) -> SceneFile:
             key = "params" if "parameter" in str(exc) else "function"
             ck.fail(f"{where}.{key}", str(exc), "objects", i, key)
     camera = _camera(cam_d, size, scene, ck)
-    per = [o.get("variant", variant) for o in objects]
+    mesh_default = KINDS["mesh"].variant_for(variant) if "mesh" in KINDS else "meshlets"   # what draws a mesh here
+    per = [o.get("variant", mesh_default if "mesh" in o else variant) for o in objects]
     mixed = per if any("variant" in o for o in objects) and len(set(per)) > 1 else None
     if mixed is None and any("variant" in o for o in objects):
         variant = per[0]
@@ -252,19 +286,83 @@ def _import(spec: str):
         raise SceneError(f"cannot load builder {spec!r}: {exc}") from None
 
 
-def _add_instances(scene, o, params, path, m, mat, ck, where, i):
-    """``instances = { builder = "module:function", args = {...} }``: the builder returns the
-    instance arrays (count, params, per_instance, transforms, colors) of ``Scene.add_instances``."""
+INSTANCES_FORMS = ('{ builder = "module:function", args = { ... } } or '
+                   '{ grid = [nx, ny, nz], spacing = s or [sx, sy, sz] }')
+
+
+def _instances(o, ck, where, i, allowed: set) -> dict:
+    """The instance arrays of ``instances``: from a builder (``builder = "module:function"``,
+    ``args``), which returns a dict (count, transforms, colors, and for functions params and
+    per_instance), or a grid of copies centred on the origin (``grid``, ``spacing``)."""
     spec = o["instances"]
+    if isinstance(spec, dict) and "grid" in spec:
+        if set(spec) - {"grid", "spacing"}:
+            ck.fail(f"{where}.instances", f"must be {INSTANCES_FORMS}", "objects", i, "instances")
+        g = spec["grid"]
+        if not (isinstance(g, list) and len(g) == 3 and all(isinstance(x, int) and not isinstance(x, bool)
+                                                            and x >= 1 for x in g)) or math.prod(g) > 1 << 24:
+            ck.fail(f"{where}.instances", f"grid must be [nx, ny, nz], integers >= 1 (at most 2^24 copies), got {g!r}",
+                    "objects", i, "instances")
+        sp = spec.get("spacing", 1.0)
+        sp = [sp] * 3 if isinstance(sp, (int, float)) and not isinstance(sp, bool) else sp
+        if not (isinstance(sp, list) and len(sp) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                              and np.isfinite(x) and x > 0 for x in sp)):
+            ck.fail(f"{where}.instances", f"spacing must be a positive number or [sx, sy, sz], got {spec['spacing']!r}",
+                    "objects", i, "instances")
+        idx = np.stack(np.meshgrid(*[np.arange(n) for n in g], indexing="ij"), axis=-1).reshape(-1, 3)
+        tr = np.repeat(np.eye(4)[None], len(idx), axis=0)
+        tr[:, :3, 3] = (idx - (np.asarray(g) - 1) / 2) * np.asarray(sp, float)
+        return {"count": len(idx), "transforms": tr}
     if not isinstance(spec, dict) or "builder" not in spec or set(spec) - {"builder", "args"}:
-        ck.fail(f"{where}.instances", 'must be { builder = "module:function", args = { ... } }', "objects", i, "instances")
+        ck.fail(f"{where}.instances", f"must be {INSTANCES_FORMS}", "objects", i, "instances")
+    if not isinstance(spec.get("args", {}), dict):
+        ck.fail(f"{where}.instances", "args must be a table of name = value", "objects", i, "instances")
     try:
-        res = _import(spec["builder"])(**spec.get("args", {}))
+        builder = _import(spec["builder"])
+    except SceneError as exc:
+        ck.fail(f"{where}.instances", str(exc), "objects", i, "instances")
+    try:
+        res = builder(**spec.get("args", {}))
     except (TypeError, ValueError) as exc:
         ck.fail(f"{where}.instances", f"builder {spec['builder']} failed: {exc}", "objects", i, "instances")
+    if not isinstance(res, dict) or "count" not in res or set(res) - allowed:
+        got = sorted(res) if isinstance(res, dict) else type(res).__name__
+        ck.fail(f"{where}.instances", f"builder {spec['builder']} must return a dict with count and optionally "
+                f"{', '.join(sorted(allowed - {'count'}))}; got {got}", "objects", i, "instances")
+    return res
+
+
+def _add_instances(scene, o, params, path, m, mat, ck, where, i):
+    """``instances = ...`` (see ``_instances``) of a function object: ``Scene.add_instances``."""
+    res = _instances(o, ck, where, i, {"count", "params", "per_instance", "transforms", "colors"})
     scene.add_instances(o["function"], res["count"], params={**res.get("params", {}), **params},
                         per_instance=res.get("per_instance"), transforms=res.get("transforms"),
                         transform=m, material=mat, colors=res.get("colors"))
+
+
+def _check_mesh_keys(o, ck, where, i):
+    if not isinstance(o["mesh"], str) or not o["mesh"].strip():
+        ck.fail(f"{where}.mesh", f'must be a file name such as "bunny.ply" (relative to the scene file), '
+                f"got {o['mesh']!r}", "objects", i, "mesh")
+    if "params" in o:
+        ck.fail(f"{where}.params", "a mesh takes no params (they are for function objects)", "objects", i, "params")
+    if o.get("lod", "dag") not in MESH_LODS:
+        ck.fail(f"{where}.lod", f"must be one of {', '.join(map(repr, MESH_LODS))} (\"dag\": level of detail "
+                f"per frame, \"full\": every triangle), got {o['lod']!r}", "objects", i, "lod")
+
+
+def _add_mesh(scene, o, path, m, mat, ck, where, i):
+    """``mesh = "x.ply"`` (relative to the scene file), ``lod``, and optionally ``instances``
+    (count, transforms and colors) and ``variant = "meshlets"`` or ``"meshlets:<AA mode>"``."""
+    file = (path.parent / o["mesh"]).resolve()
+    variant, _, aa = o["variant"].partition(":") if "variant" in o else (None, "", "")
+    lod = o.get("lod", "dag")
+    if "instances" in o:
+        res = _instances(o, ck, where, i, {"count", "transforms", "colors"})
+        scene.add_mesh_instances(file, res["count"], transforms=res.get("transforms"), transform=m, material=mat,
+                                 colors=res.get("colors"), lod=lod, variant=variant, aa=aa or None)
+    else:
+        scene.add_mesh(file, lod=lod, transform=m, material=mat, variant=variant, aa=aa or None)
 
 
 def _add_surfels(scene, spec, path, m, mat, ck, where, i):

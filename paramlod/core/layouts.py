@@ -216,7 +216,25 @@ RENDER_PATCH = Record(
     ], struct="RenderPatch",
     constants=[Constant("FLAG_FORCED", 16, True, "RenderPatch.flags: forced out at the last step")])
 
-RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH)
+CLUSTER = Record(
+    "cluster", "one cluster of a mesh's LOD DAG (paramlod.meshlod; object space). A cluster is drawn "
+    "iff its own error projects to <= the threshold and its parent error to > it", [
+        Field("sphere", FLOAT, 4, "bounding sphere of its triangles: centre xyz, radius (culling)"),
+        Field("cone_apex", FLOAT, 4, "backface cone apex xyz, w unused"),
+        Field("cone", FLOAT, 4, "backface cone axis xyz, cutoff (cos); culled iff dot(normalize(apex - eye), axis) >= cutoff"),
+        Field("lod_sphere", FLOAT, 4, "sphere of the group it was made in; contains its children's lod spheres"),
+        Field("parent_sphere", FLOAT, 4, "lod sphere of the group it was simplified into (its parents' lod_sphere)"),
+        Field("error", FLOAT, 1, "object-space error of its group (0 for the original triangles)"),
+        Field("parent_error", FLOAT, 1, "error of the parents' group; +inf for a root"),
+        Field("first", UINT, 1, "first triangle in the mesh's triangle list"),
+        Field("count", UINT, 1, "triangles (at most CLUSTER_MAX_TRIANGLES)"),
+        Field("level", UINT, 1, "0 for the original triangles"),
+        Field("group", UINT, 1, "the group it was made in (clusters of one group share lod_sphere and error)"),
+        Field("spare", UINT, 2),
+    ], struct="Cluster",
+    constants=[Constant("CLUSTER_MAX_TRIANGLES", 128, True, "triangles per cluster at most")])
+
+RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH, CLUSTER)
 
 # Constants the host and the kernels share that belong to no record: work-group sizes the host
 # launches with and the kernels declare (reqd_work_group_size, __local arrays).

@@ -56,8 +56,9 @@ class Pipeline:
         if not isinstance(camera, Camera):
             raise SceneError(f"render needs a paramlod.Camera, got {type(camera).__name__}")
         check_variant(variant)
-        if not scene.objects and not scene.surfels:
-            raise SceneError("the scene has no objects; add one with scene.add(...) or scene.add_surfels(...)")
+        if not scene.object_count:
+            raise SceneError("the scene has no objects; add one with scene.add(...), scene.add_mesh(...) or "
+                             "scene.add_surfels(...)")
         if time_ is not None:
             scene.time = float(time_)
         settings = settings or RenderSettings()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from paramlod.errors import SceneError
 from paramlod.pipeline.plan import plan
+from paramlod.renderers.registry import KINDS
 from paramlod.renderers.targets import Downsample, KeyBuffer
 
 MAX_SIDE = 16384   # subsamples per side of a supersampled key buffer
@@ -17,7 +18,7 @@ class SceneState:
         self.passes = []
         self.subscenes: dict = {}      # Group -> its subscene
         self._by_group: dict = {}      # Group -> its renderer state, for the current plan
-        self._renderers: dict = {}     # (variant, functions) -> renderer state
+        self._renderers: dict = {}     # (variant, aa, functions) -> renderer state
         self._keys: dict = {}          # (w, h, ss) -> KeyBuffer
         self._downsample: dict = {}    # ss -> Downsample
 
@@ -26,7 +27,7 @@ class SceneState:
         key = (scene._version, variant, settings.points.supersample, settings.tess.aa)
         if key != self._plan_key:
             self.passes = plan(scene, variant, settings)
-            self.subscenes = {g: scene.subscene(*((g.objects, ()) if g.spec.kind != "surfels" else ((), g.objects)))
+            self.subscenes = {g: scene.subscene(**{KINDS[g.spec.kind].scene_field: g.objects})
                               for p in self.passes for g in p.groups}
             self._by_group = {}
             self._plan_key = key
@@ -36,11 +37,12 @@ class SceneState:
 
     def renderer(self, group):
         """The renderer state that draws ``group``: made on first use and kept for the plan; a new
-        plan reuses the state of a group of the same variant and functions (programs, LOD buffers)."""
+        plan reuses the state of a group of the same variant, AA mode and functions (programs, LOD
+        buffers, uploads)."""
         state = self._by_group.get(group)
         if state is None:
             functions = tuple(self.subscenes[group].functions())
-            key = (group.spec.variant, functions)
+            key = (group.spec.variant, group.aa, functions)
             state = self._renderers.get(key)
             if state is None:
                 state = self._renderers[key] = group.spec.factory(list(functions))

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from paramlod.errors import SceneError
 from paramlod.renderers.aa import supersampling_only
-from paramlod.renderers.registry import KINDS, RendererSpec, renderer, variants
+from paramlod.renderers.registry import KINDS, RendererSpec, renderer
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,7 +38,7 @@ def plan(scene, variant, settings) -> list[Pass]:
     groups: dict[tuple, list] = {}
     for kind in KINDS.values():
         for obj in kind.objects(scene):
-            v = getattr(obj, "variant", None) or (variant if variant in variants(kind.name) else kind.default_variant)
+            v = getattr(obj, "variant", None) or kind.variant_for(variant)
             spec = renderer(v, kind.name)
             groups.setdefault((spec.variant, getattr(obj, "aa", None)), []).append(obj)
     keys: dict[int, list] = {}

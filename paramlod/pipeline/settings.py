@@ -15,6 +15,7 @@ class RenderSettings:
     points: "PointSettings" = field(default_factory=settings_factory("points"))     # direct variant, surfels
     ssaa: "SsaaSettings" = field(default_factory=settings_factory("points-ssaa"))   # local framebuffer
     tess: "TessSettings" = field(default_factory=settings_factory("tess"))          # levels, spacing, AA
+    mesh: "MeshSettings" = field(default_factory=settings_factory("meshlets"))      # cut threshold, culling
 
     def apply_aa(self, mode, points_only: bool = False):
         """Anti-aliasing ``mode`` (e.g. "4xSS+8xMS") for both renderers: tess takes it whole, the

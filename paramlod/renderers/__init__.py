@@ -3,4 +3,4 @@ sampling. Importing the package registers the built-in renderers and the paramet
 from paramlod.renderers import points, points_lfb, tess  # noqa: F401  (they register themselves)
 from paramlod.renderers.registry import ObjectKind, register_kind
 
-register_kind(ObjectKind("parametric", lambda scene: scene.objects, "points"))
+register_kind(ObjectKind("parametric", "points", "objects"))

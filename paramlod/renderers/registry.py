@@ -1,8 +1,8 @@
 """What draws what: object kinds and renderers declare themselves here (as pygfx picks a render
 function by object and material type), and the frame plan looks them up.
 
-An object kind ("parametric", "surfels", ...) names how to find its objects in a scene and the
-variant that draws them by default. A renderer names its variant, the kind it draws, the
+An object kind ("parametric", "surfels", "mesh") names the Scene attribute that holds its objects
+and the variant that draws them by default (or with a frame variant of another kind). A renderer names its variant, the kind it draws, the
 ``RenderSettings`` field that holds its settings, its target ("keys": the shared 64-bit key
 buffers, OpenCL; "gl": its own OpenGL targets resolved into a host Frame), and a factory that
 makes its per-scene state from the functions of the objects it draws.
@@ -16,7 +16,7 @@ one wait, ``grow(settings)`` (True if a buffer grew and the frame must be drawn 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 from paramlod.errors import SceneError
@@ -25,8 +25,20 @@ from paramlod.errors import SceneError
 @dataclass(frozen=True)
 class ObjectKind:
     name: str
-    objects: Callable      # scene -> list of its objects of this kind
     default_variant: str   # the variant that draws an object of this kind when none is asked for
+    scene_field: str       # the Scene attribute holding its objects, and Scene.subscene's keyword
+    # frame variant of another kind -> the variant of this kind that goes with it ({"tess": "meshlets-gl"})
+    follows: dict = field(default_factory=dict)
+
+    def objects(self, scene) -> list:
+        return getattr(scene, self.scene_field)
+
+    def variant_for(self, frame_variant: str | None) -> str:
+        """The variant that draws an object of this kind that has none, in a frame of ``frame_variant``."""
+        spec = RENDERERS.get(frame_variant) if isinstance(frame_variant, str) else None
+        if spec is not None and spec.kind == self.name:
+            return frame_variant
+        return self.follows.get(frame_variant, self.default_variant)
 
 
 @dataclass(frozen=True)

@@ -12,10 +12,10 @@ combinations such as ``4xSS+8xMS`` (32 depth samples per pixel). A multisample r
 the device supports is capped, with a warning and ``stats["warnings"]``. The LOD thresholds are
 divided by ``lod_divisor(mode)``: the supersampling factor per axis (``msaa_lod`` adds sqrt(MSAA)).
 
-Targets: colour RGBA16F (hardware multisample resolve, then a box downsample of the SSAA block),
-linear view depth R32F, world normal RGBA16F and object id R32UI (resolved to the nearest covered
-sample of the pixel; ``kernels/tess_resolve_fragment.glsl``). ``docs/tessellation.md`` has the
-details, including how cracks between patches are avoided.
+Targets and their resolve: ``paramlod.renderers.gl_targets`` (colour RGBA16F, hardware multisample
+resolve, then a box downsample of the SSAA block; linear view depth R32F, world normal RGBA16F and
+object id R32UI, resolved to the nearest covered sample of the pixel). ``docs/tessellation.md`` has
+the details, including how cracks between patches are avoided.
 """
 from __future__ import annotations
 
@@ -33,12 +33,13 @@ from paramlod.core.frame import Frame
 from paramlod.core.layouts import RENDER_PATCH, glsl_prelude, vertex_format
 from paramlod.device.context import cl_device, gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
-from paramlod.errors import DeviceError, FunctionError, SceneError
+from paramlod.errors import FunctionError, SceneError
 from paramlod.function.codegen_glsl import glsl_dispatch_source
 from paramlod.lod.patches import RENDER_DTYPE
 from paramlod.lod.stage import LodStage
 from paramlod.lod.uploads import SceneBuffers
-from paramlod.renderers.aa import AAMode, cap_samples, lod_divisor, parse_aa  # noqa: F401  (lod_divisor re-exported)
+from paramlod.renderers.aa import AAMode, lod_divisor, parse_aa  # noqa: F401  (AAMode, lod_divisor re-exported)
+from paramlod.renderers.gl_targets import GLTargets, effective_aa, max_samples, resolve_program, targets_for
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.shading import LIGHT
 from paramlod.scene.scene import Scene
@@ -138,81 +139,9 @@ def build_programs(ctx, functions, spacing: str):
     return progs
 
 
-def _resolve_program(ctx, ss: int, samples: int):
-    programs = gl_cache(ctx).setdefault("tess_resolve_programs", {})
-    key = (ss, samples)
-    prog = programs.get(key)
-    if prog is None:
-        defs = {"PL_SS": ss, "PL_SAMPLES": samples}
-        if samples > 1:
-            defs["PL_MS"] = 1
-        prog = programs[key] = _program(ctx, {
-            "vertex_shader": _stage(defs, [kernels.source("tess/tess_resolve_vertex.glsl")]),
-            "fragment_shader": _stage(defs, [kernels.source("tess/tess_resolve_fragment.glsl")]),
-        }, [])
-    return prog
-
-
-_DRAW_MASK = ((True,) * 4,) * 4                        # colour, depth, normal, object id
-_CLEAR_MASK = ((True,) * 4,) + ((False,) * 4,) * 3
-
-
-
-
 def _mat(m) -> np.ndarray:
     """A row-major 4x4 matrix as GLSL's column-major mat4 bytes."""
     return np.ascontiguousarray(np.asarray(m, np.float64).T, np.float32)
-
-
-# --- render targets -----------------------------------------------------------------------------
-class _Targets:
-    """Multisampled (or not) render targets at the supersampled size, and the resolve targets."""
-
-    def __init__(self, ctx, size: tuple[int, int], ss: int, samples: int):
-        self.size, self.ss, self.samples = size, ss, samples
-        w, h = size
-        big = (w * ss, h * ss)
-        ms = samples if samples > 1 else 0
-        limit = min(int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)), int(ctx.info.get("GL_MAX_RENDERBUFFER_SIZE", 16384)))
-        if max(big) > limit:
-            raise SceneError(f"{ss}x{ss} supersampling of {w}x{h} needs {big[0]}x{big[1]} render targets, more than "
-                             f"this OpenGL device's limit of {limit} pixels per side; use a smaller size or less supersampling")
-        try:
-            self.color = ctx.texture(big, 4, dtype="f2", samples=ms)
-            self.depth = ctx.texture(big, 1, dtype="f4", samples=ms)
-            self.normal = ctx.texture(big, 4, dtype="f2", samples=ms)
-            self.object = ctx.texture(big, 1, dtype="u4", samples=ms)
-            self.zbuf = ctx.depth_renderbuffer(big, samples=ms)
-            self.fbo = ctx.framebuffer([self.color, self.depth, self.normal, self.object], self.zbuf)
-            if ms:
-                self.color_ms_fbo = ctx.framebuffer([self.color])
-                self.color_resolved = ctx.texture(big, 4, dtype="f2")
-                self.color_resolved_fbo = ctx.framebuffer([self.color_resolved])
-            else:
-                self.color_resolved = self.color
-            # integer textures must be sampled with NEAREST (else incomplete); multisample ones have no filter
-            single = [self.color_resolved] + ([] if ms else [self.depth, self.normal, self.object])
-            for t in single:
-                t.filter = (ctx.NEAREST, ctx.NEAREST)
-            self.out_color = ctx.texture(size, 4, dtype="f4")
-            self.out_depth = ctx.texture(size, 1, dtype="f4")
-            self.out_normal = ctx.texture(size, 4, dtype="f4")
-            self.out_object = ctx.texture(size, 1, dtype="u4")
-            self.out_fbo = ctx.framebuffer([self.out_color, self.out_depth, self.out_normal, self.out_object])
-        except Exception as exc:  # moderngl.Error: out of memory, unsupported format
-            self.release()
-            raise DeviceError(f"could not create the tessellation render targets ({w}x{h}, {ss}x{ss} SS, "
-                              f"{samples} samples): {exc}") from None
-
-    def release(self):
-        for name in ("fbo", "color_ms_fbo", "color_resolved_fbo", "out_fbo", "color", "depth", "normal", "object",
-                     "zbuf", "color_resolved", "out_color", "out_depth", "out_normal", "out_object"):
-            obj = self.__dict__.pop(name, None)
-            if obj is not None:
-                try:
-                    obj.release()
-                except Exception:
-                    pass
 
 
 class _GrowBuffer:
@@ -238,7 +167,7 @@ class TessRenderer:
         self.functions = list(functions)
         self.ctx = gl_context()
         glsl_dispatch_source(self.functions, position=True, surface=False)  # fails early, naming the function
-        self._targets: _Targets | None = None
+        self._targets: GLTargets | None = None
         c = self.ctx
         self._patches = _GrowBuffer(c, 64 * 1024)
         self._params = _GrowBuffer(c, 1024)
@@ -250,22 +179,11 @@ class TessRenderer:
 
     @property
     def max_samples(self) -> int:
-        info = self.ctx.info
-        keys = ("GL_MAX_SAMPLES", "GL_MAX_COLOR_TEXTURE_SAMPLES", "GL_MAX_INTEGER_SAMPLES", "GL_MAX_DEPTH_TEXTURE_SAMPLES")
-        vals = [int(info[k]) for k in keys if info.get(k) is not None]
-        return min(vals) if vals else 1
+        return max_samples(self.ctx)
 
     def effective_aa(self, mode) -> tuple[AAMode, AAMode, list[str]]:
         """(requested, effective, warnings): the multisample count capped to the device."""
-        req = parse_aa(mode)
-        eff, notes = req, []
-        if req.msaa > 1:
-            got = cap_samples(req.msaa, self.max_samples)
-            if got != req.msaa:
-                eff = AAMode(req.ss, got)
-                notes.append(f"{req.msaa}xMS requested but this OpenGL device ({self.ctx.info.get('GL_RENDERER')}) "
-                             f"supports at most {self.max_samples} samples: rendering {eff.name} instead of {req.name}")
-        return req, eff, notes
+        return effective_aa(self.ctx, mode)
 
     def patches_per_draw(self, settings: TessSettings) -> int:
         """Patches per draw call. One call draws everything, except on Mesa's llvmpipe, which
@@ -278,13 +196,9 @@ class TessRenderer:
         side = int(math.ceil(top)) + 2           # vertices per row, fractional spacing included
         return max(1, LLVMPIPE_VERTEX_BUDGET // (side * side + 4 * side))
 
-    def _targets_for(self, size, ss, samples) -> _Targets:
-        t = self._targets
-        if t is None or (t.size, t.ss, t.samples) != (tuple(size), ss, samples):
-            if t is not None:
-                t.release()
-            self._targets = None
-            self._targets = _Targets(self.ctx, tuple(size), ss, samples)
+    def _targets_for(self, size, ss, samples) -> GLTargets:
+        t, self._targets = self._targets, None   # not kept when making new ones fails
+        self._targets = targets_for(t, self.ctx, size, ss, samples, "tessellation")
         return self._targets
 
     def _vao(self, prog):
@@ -335,7 +249,7 @@ class TessRenderer:
         ctx = self.ctx
         t0 = time.perf_counter()
         prog = build_programs(ctx, self.functions, settings.spacing)
-        resolve = _resolve_program(ctx, aa.ss, aa.msaa)
+        resolve_program(ctx, aa.ss, aa.msaa)   # compiled with the setup (targets_for reuses it)
         w, h = camera.size
         tg = self._targets_for((w, h), aa.ss, aa.msaa)
         t1 = time.perf_counter()
@@ -370,13 +284,7 @@ class TessRenderer:
             b.buf.bind_to_storage_buffer(binding)
         self._counters.bind_to_storage_buffer(4)
 
-        tg.fbo.use()
-        # only the colour (its alpha marks covered samples) and the depth buffer are cleared: the
-        # resolve never reads the other attachments where nothing was drawn, and on the H200
-        # each cleared 4xSS+8xMS attachment costs 5-10 ms (its graphics units are few)
-        tg.fbo.color_mask = _CLEAR_MASK
-        tg.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        tg.fbo.color_mask = _DRAW_MASK
+        tg.begin()
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         triangles, draw_calls = 0, 0
@@ -394,30 +302,15 @@ class TessRenderer:
         t3 = time.perf_counter()
 
         # resolve: hardware multisample resolve of the colour, then the SSAA block in a shader
-        if aa.msaa > 1:
-            ctx.copy_framebuffer(tg.color_resolved_fbo, tg.color_ms_fbo)
-        ctx.disable(moderngl.DEPTH_TEST)
-        tg.out_fbo.use()
-        self._counters.bind_to_storage_buffer(4)
-        for unit, (name, tex) in enumerate((("u_color", tg.color_resolved), ("u_coverage", tg.color),
-                                            ("u_depth", tg.depth), ("u_normal", tg.normal),
-                                            ("u_object", tg.object))):
-            tex.use(location=unit)
-            set_uniform(resolve, name, unit)
-        self._resolve_vao(resolve).render(mode=moderngl.TRIANGLES, vertices=3)
-        ctx.finish()
+        device_samples = tg.resolve()
         t4 = time.perf_counter()
 
-        color = np.frombuffer(tg.out_color.read(), np.float32).reshape(h, w, 4)[::-1]
-        depth = np.frombuffer(tg.out_depth.read(), np.float32).reshape(h, w)[::-1]
-        normal = np.frombuffer(tg.out_normal.read(), np.float32).reshape(h, w, 4)[::-1, :, :3]
-        ids = np.frombuffer(tg.out_object.read(), np.uint32).reshape(h, w)[::-1]
-        nan_vertices, device_samples = (int(x) for x in np.frombuffer(self._counters.read(8), np.uint32))
+        color, depth, normal, ids = tg.read()
+        nan_vertices = int(np.frombuffer(self._counters.read(4), np.uint32)[0])
         if device_samples != aa.msaa:
             notes.append(f"the device allocated {device_samples} samples per pixel for a {aa.msaa}-sample "
                          "request; coverage and the depth/id resolve use all of them")
-        frame = Frame(color=np.ascontiguousarray(color), depth=np.ascontiguousarray(depth),
-                      normal=np.ascontiguousarray(normal), object_id=np.ascontiguousarray(ids))
+        frame = Frame(color=color, depth=depth, normal=normal, object_id=ids)
         frame.background = scene.background
         written = int(np.count_nonzero(np.isfinite(depth)))
         t5 = time.perf_counter()   # readback: textures to host arrays, flipped to row 0 = top
@@ -447,13 +340,6 @@ class TessRenderer:
                    "resolve": (t4 - t3) * 1e3, "readback": (t5 - t4) * 1e3, "total": (t5 - t0) * 1e3},
         }
         return frame
-
-    def _resolve_vao(self, prog):
-        key = ("resolve", id(prog))
-        vao = self._vaos.get(key)
-        if vao is None:
-            vao = self._vaos[key] = self.ctx.vertex_array(prog, [])
-        return vao
 
 
 class Tessellation:

@@ -1,4 +1,4 @@
-"""Cameras that frame a scene: bounds from numpy samples of its functions."""
+"""Cameras that frame a scene: bounds from numpy samples of its functions, surfels and mesh boxes."""
 from __future__ import annotations
 
 import numpy as np
@@ -38,6 +38,13 @@ def scene_box(scene) -> tuple[np.ndarray, np.ndarray]:
             lo, hi = np.minimum(lo, origins.min(axis=0) - r), np.maximum(hi, origins.max(axis=0) + r)
     for so in scene.surfels:
         w = so.surfels.positions @ so.transform[:3, :3].T + so.transform[:3, 3]
+        lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
+    for mo in scene.meshes:
+        v = mo.mesh.vertices
+        a, b = v.min(axis=0).astype(np.float64), v.max(axis=0).astype(np.float64)
+        corners = np.array([[x, y, z, 1.0] for x in (a[0], b[0]) for y in (a[1], b[1]) for z in (a[2], b[2])])
+        models = [mo.transform] if mo.transforms is None else mo.transform @ mo.transforms
+        w = (np.asarray(models) @ corners.T)[:, :3].transpose(0, 2, 1).reshape(-1, 3)  # every copy's box corners
         lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
     if not np.all(np.isfinite(lo)):
         return -np.ones(3), np.ones(3)

@@ -5,6 +5,10 @@ An object may stand for many instances (``add_instances``): per-instance paramet
 transforms are numpy arrays, so a 358,140-fiber curtain is built without a Python loop per
 instance. Parts declared by a function (``parts=[Part(...)]``) become child instances placed on
 the parent's surface frame, recomputed for the scene's ``time``.
+
+Meshes (``add_mesh``, ``add_mesh_instances``) hold a MeshLod that the "mesh" loader of
+``paramlod.scene.loaders`` makes (registered by ``paramlod.meshlod``, which this room does not
+import); a source added twice to one scene is loaded once, so the device holds it once.
 """
 from __future__ import annotations
 
@@ -17,6 +21,7 @@ from paramlod.errors import FunctionError, SceneError
 from paramlod.function.define import ParametricFunction
 from paramlod.function.registry import get_function
 from paramlod.scene.loaders import load
+from paramlod.scene.meshes import source_key, source_label
 from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
 from paramlod.core.transforms import matrix as _as_matrix
 
@@ -25,7 +30,8 @@ from paramlod.core.transforms import matrix as _as_matrix
 INST_FLOATS = INSTANCE_F.length
 # Per-instance uint record (INSTANCE_U): function index, parameter-block offset, object id, flags.
 INST_UINTS = INSTANCE_U.length
-MAX_OBJECTS = 4095   # object ids are carried in 12 bits of the aux key (docs/frame.md)
+MAX_OBJECTS = 4095   # object ids are carried in 12 bits of the aux key (docs/frame.md); all kinds together
+MESH_LODS = ("dag", "full")
 MAX_PART_DEPTH = 4
 _versions = itertools.count(1)
 
@@ -70,6 +76,27 @@ class SurfelObject:
     specular: float = 0.25
 
 
+@dataclass
+class MeshObject:
+    """A triangle mesh with its level of detail (paramlod.meshlod.MeshLod), drawn ``count`` times."""
+
+    mesh: object                       # paramlod.meshlod.format.MeshLod
+    transform: np.ndarray              # 4x4, applied after the per-instance transforms
+    material: Material
+    object_id: int
+    count: int = 1
+    transforms: np.ndarray | None = None   # [count, 4, 4] or None
+    colors: np.ndarray | None = None       # [count, 3] linear RGB, or None
+    variant: str | None = None   # "meshlets" (OpenCL raster into the key buffers), "meshlets-gl"; None: the frame's
+    aa: str | None = None
+
+
+def _check_names(variant, aa) -> None:
+    for name, value in (("variant", variant), ("aa", aa)):
+        if value is not None and not (isinstance(value, str) and value.strip()):
+            raise SceneError(f"{name} must be a name such as 'points', 'tess', 'meshlets' or '4xSS', got {value!r}")
+
+
 def _param_columns(fn: ParametricFunction) -> dict[str, slice]:
     cols, at = {}, 0
     for p in fn.params:
@@ -99,6 +126,8 @@ class Scene:
     def __init__(self, background=(0.12, 0.12, 0.14), time: float = 0.0):
         self.objects: list[SceneObject] = []
         self.surfels: list[SurfelObject] = []
+        self.meshes: list[MeshObject] = []
+        self._loaded_meshes: dict = {}   # (source key, lod) -> (the source, kept alive; its MeshLod)
         self.background = tuple(float(x) for x in background)
         self.time = float(time)
         self._version = next(_versions)
@@ -121,13 +150,9 @@ class Scene:
         [count, 3] array of linear RGB in [0, 1] that replaces the material colour per instance.
         ``variant`` and ``aa``: as in ``add``.
         """
-        for name, value in (("variant", variant), ("aa", aa)):
-            if value is not None and not (isinstance(value, str) and value.strip()):
-                raise SceneError(f"{name} must be a name such as 'points', 'tess' or '4xSS', got {value!r}")
+        _check_names(variant, aa)
         fn = get_function(fn_or_name)
-        if self.object_count >= MAX_OBJECTS:
-            raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits); "
-                             "use add_instances for many copies of one function")
+        self._check_room("use add_instances for many copies of one function")
         count = int(count)
         if count < 1:
             raise SceneError(f"'{fn.name}': instance count must be at least 1, got {count}")
@@ -166,15 +191,85 @@ class Scene:
         self.touch()
         return obj
 
-    def subscene(self, objects, surfels=()) -> "Scene":
-        """A scene that draws only ``objects`` (SceneObjects of this scene) and ``surfels`` (its
-        SurfelObjects), keeping their object ids, background and time, so that frames of several
-        subscenes composite into the whole scene."""
-        ids = {id(o) for o in self.objects} | {id(o) for o in self.surfels}
-        if any(id(o) not in ids for o in (*objects, *surfels)):
+    def add_mesh(self, source, lod: str = "dag", transform=None, material: Material | None = None,
+                 variant: str | None = None, aa: str | None = None) -> MeshObject:
+        """Add a triangle mesh: a file path (OBJ, PLY, STL, OFF, GLB/glTF, GIfTI ``.surf.gii``), a
+        ``trimesh.Trimesh`` or a ``(vertices, faces)`` pair. ``lod``: "dag" (a cluster DAG, drawn
+        at the detail the camera needs) or "full" (always every triangle). ``variant`` and ``aa``
+        pick its renderer ("meshlets", "meshlets-gl") and anti-aliasing (default: the frame's)."""
+        return self.add_mesh_instances(source, 1, transform=transform, material=material, lod=lod,
+                                       variant=variant, aa=aa)
+
+    def add_mesh_instances(self, source, count: int, transforms=None, transform=None,
+                           material: Material | None = None, colors=None, lod: str = "dag",
+                           variant: str | None = None, aa: str | None = None) -> MeshObject:
+        """Add ``count`` copies of one mesh as one object (one object id, one material).
+
+        ``transforms``: an optional [count, 4, 4] array applied before ``transform``; ``colors``: an
+        optional [count, 3] array of linear RGB in [0, 1] that replaces the material colour per
+        copy. The mesh is loaded once per scene for each source (the same object, or the same
+        file) and ``lod``, however many objects use it."""
+        label = source_label(source)
+        _check_names(variant, aa)
+        self._check_room("use add_mesh_instances for many copies of one mesh")
+        if lod not in MESH_LODS:
+            raise SceneError(f"mesh '{label}': lod must be one of {', '.join(map(repr, MESH_LODS))}, got {lod!r}")
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+            raise SceneError(f"mesh '{label}': instance count must be an integer of at least 1, got {count!r}")
+        count = int(count)
+        if material is not None and not isinstance(material, Material):
+            raise SceneError(f"mesh '{label}': material must be a paramlod.Material, got {type(material).__name__}")
+        try:
+            m = np.eye(4) if transform is None else _as_matrix(transform)
+        except SceneError as exc:
+            raise SceneError(f"mesh '{label}': {exc}") from None
+        if transforms is not None:
+            try:
+                transforms = np.asarray(transforms, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise SceneError(f"mesh '{label}': transforms must be a [{count}, 4, 4] array of numbers") from None
+            if transforms.shape != (count, 4, 4) or not np.all(np.isfinite(transforms)):
+                raise SceneError(f"mesh '{label}': transforms must be a finite [{count}, 4, 4] array, "
+                                 f"got shape {transforms.shape}")
+        models = m[None] if transforms is None else m @ transforms
+        det = np.linalg.det(models[:, :3, :3])
+        if np.any(np.abs(det) < 1e-20):
+            k = int(np.argmax(np.abs(det) < 1e-20))
+            which = "the transform" if transforms is None else f"instance {k}'s transform"
+            raise SceneError(f"mesh '{label}': {which} is singular (it flattens the mesh); give an invertible one")
+        if colors is not None:
+            try:
+                colors = np.asarray(colors, dtype=np.float32)
+            except (TypeError, ValueError):
+                raise SceneError(f"mesh '{label}': colors must be a [{count}, 3] array of values in [0, 1]") from None
+            if colors.shape != (count, 3) or not np.all((colors >= 0) & (colors <= 1)):
+                raise SceneError(f"mesh '{label}': colors must be a [{count}, 3] array of values in [0, 1]")
+        obj = MeshObject(self._load_mesh(source, lod), m, material or Material(), self.object_count + 1, count,
+                         transforms, colors, variant, aa)
+        self.meshes.append(obj)
+        self.touch()
+        return obj
+
+    def _load_mesh(self, source, lod):
+        key = (source_key(source), lod)
+        hit = self._loaded_meshes.get(key)
+        if hit is None:
+            hit = self._loaded_meshes[key] = (source, load("mesh", source, lod=lod))
+        return hit[1]
+
+    def _check_room(self, hint: str) -> None:
+        if self.object_count >= MAX_OBJECTS:
+            raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits); {hint}")
+
+    def subscene(self, objects=(), surfels=(), meshes=()) -> "Scene":
+        """A scene that draws only ``objects`` (SceneObjects of this scene), ``surfels`` (its
+        SurfelObjects) and ``meshes`` (its MeshObjects), keeping their object ids, background and
+        time, so that frames of several subscenes composite into the whole scene."""
+        ids = {id(o) for o in (*self.objects, *self.surfels, *self.meshes)}
+        if any(id(o) not in ids for o in (*objects, *surfels, *meshes)):
             raise SceneError("subscene: an object does not belong to the scene")
         sub = Scene(background=self.background, time=self.time)
-        sub.objects, sub.surfels = list(objects), list(surfels)
+        sub.objects, sub.surfels, sub.meshes = list(objects), list(surfels), list(meshes)
         sub.touch()
         return sub
 
@@ -186,8 +281,7 @@ class Scene:
     def add_surfels(self, path_or_set, transform=None, strategy=None, specular: float = 0.25) -> SurfelObject:
         """Add a ``.surfels`` file or SurfelSet; ``strategy`` picks the prefix each frame
         (paramlod.surfels.FixedSize(2) when None, FixedCount, FrameTimeAdaptive)."""
-        if self.object_count >= MAX_OBJECTS:
-            raise SceneError(f"a scene holds at most {MAX_OBJECTS} objects (object ids use 12 bits)")
+        self._check_room("merge surfel sets into one file")
         m = np.eye(4) if transform is None else _as_matrix(transform)
         obj = SurfelObject(load("surfels", path_or_set), m, strategy, self.object_count + 1, specular)
         self.surfels.append(obj)
@@ -196,7 +290,13 @@ class Scene:
 
     @property
     def object_count(self) -> int:
-        return len(self.objects) + len(self.surfels)
+        """Objects of every kind (parametric, surfels, meshes): each takes one object id."""
+        return len(self.objects) + len(self.surfels) + len(self.meshes)
+
+    @property
+    def mesh_instance_count(self) -> int:
+        """Drawn copies of meshes."""
+        return sum(o.count for o in self.meshes)
 
     @property
     def instance_count(self) -> int:

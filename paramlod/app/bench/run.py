@@ -25,6 +25,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from paramlod.app.args import add_size
+from paramlod.app.bench.meshes import format_meshes, run_meshes
 from paramlod.app.bench.scenes import DEFAULT, SCENARIOS
 from paramlod.core.camera import Camera
 from paramlod.core.files import write_atomically
@@ -60,8 +61,10 @@ def add_arguments(p):
                    help="camera distances as multiples of the framing distance (default 0.35 0.6 1 2)")
     p.add_argument("--frames", type=int, default=8, help="timed frames per orbit (default 8)")
     p.add_argument("--warmup", type=int, default=2, help="untimed frames before each orbit (default 2)")
-    p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels"],
-                   choices=["ceilings", "functions", "surfels"], help="extra measurements (default all)")
+    p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels", "meshes"],
+                   choices=["ceilings", "functions", "surfels", "meshes"], help="extra measurements (default all)")
+    p.add_argument("--big-mesh", choices=["auto", "yes", "no"], default="auto",
+                   help="also measure a 1.6 M-triangle mesh (default: on a GPU only)")
     p.add_argument("--out", default="out/bench", help="folder for results (default out/bench)")
 
 
@@ -310,6 +313,10 @@ def run_bench(args) -> int:
     if "surfels" in args.extras:
         result["surfels"] = surfel_costs(size)
         save()
+    if "meshes" in args.extras:
+        big = args.big_mesh == "yes" or (args.big_mesh == "auto" and dev.is_gpu)
+        result["meshes"] = run_meshes(size, args.frames, args.warmup, big, log=lambda m: print(m, flush=True))
+        save()
     md = format_markdown(result)
     write_atomically(out / "results.md", lambda tmp: Path(tmp).write_text(md))
     plots = make_plots(result, out)
@@ -358,6 +365,8 @@ def format_markdown(result) -> str:
         lines += [f"| {r['n']:,} | {r['seconds']:.2f} |" for r in s["sampling"]]
         lines += ["", "| prefix | render ms |", "|---:|---:|"]
         lines += [f"| {r['prefix']:,} | {r['ms']:.3f} |" for r in s["render"]]
+    if "meshes" in result:
+        lines += format_meshes(result["meshes"], ceil)
     return "\n".join(lines) + "\n"
 
 

@@ -1,0 +1,144 @@
+"""The meshes and mesh instances of a scene packed for the device: what the cut, the raster and
+the OpenGL draw read.
+
+``MeshArrays`` concatenates the MeshLods of a scene (each once, however many objects use it):
+  vertices  float32 [V, 4]   xyz, w = 1
+  normals   float32 [V, 4]   xyz, w = 0
+  triangles uint32  [T, 3]   indices into the concatenated vertices
+  clusters  CLUSTER [C]      ``first`` into the concatenated triangles
+  ranges    uint32  [M, 2]   mesh m's clusters are [ranges[m, 0], ranges[m, 0] + ranges[m, 1])
+``MeshInstances`` holds one record per drawn copy, in the instance layouts of the parametric
+objects (paramlod.core.layouts INSTANCE_F: model, normal matrix, domain unused; INSTANCE_U: func =
+the mesh's index in MeshArrays, params = 0, object id, flags: SIMILAR when the model's 3x3 part is
+a rotation times a uniform scale, so that backface cones stay valid, MIRRORED when its determinant
+is negative), its material (MATERIAL), and
+for each instance the largest scale of its model matrix (``scales``: errors and spheres grow by it).
+``batches`` lists (mesh index, first instance, instance count): instances of one mesh are
+contiguous, so the cut runs once per batch over (its mesh's clusters) x (its instances).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import pyopencl as cl
+
+from paramlod.core.layouts import CLUSTER, INSTANCE_F, INSTANCE_U, MATERIAL
+from paramlod.device.context import cl_device
+from paramlod.errors import SceneError
+
+SIMILAR, MIRRORED = 1, 2   # MeshInstances.inst_u flags
+
+
+@dataclass
+class MeshArrays:
+    vertices: np.ndarray
+    normals: np.ndarray
+    triangles: np.ndarray
+    clusters: np.ndarray
+    ranges: np.ndarray
+    meshes: list            # the MeshLods, in index order
+
+    @classmethod
+    def pack(cls, meshes) -> "MeshArrays":
+        meshes = list(meshes)
+        vb = tb = cb = 0
+        vs, ns, ts, cs, ranges = [], [], [], [], []
+        for m in meshes:
+            v = np.ones((len(m.vertices), 4), np.float32)
+            v[:, :3] = m.vertices
+            n = np.zeros((len(m.normals), 4), np.float32)
+            n[:, :3] = m.normals
+            c = m.clusters.copy()
+            c["first"] += tb
+            vs.append(v)
+            ns.append(n)
+            ts.append(m.triangles.astype(np.uint32) + np.uint32(vb))
+            cs.append(c)
+            ranges.append((cb, len(c)))
+            vb += len(v)
+            tb += len(m.triangles)
+            cb += len(c)
+        if vb >= 2 ** 32 or tb >= 2 ** 32 // 3:
+            raise SceneError(f"the scene's meshes hold {vb} vertices and {tb} triangles; at most 2^32 vertex "
+                             "indices fit the device's index buffer")
+        empty = [np.zeros((0, 4), np.float32)]
+        return cls(np.concatenate(vs or empty), np.concatenate(ns or empty),
+                   np.concatenate(ts or [np.zeros((0, 3), np.uint32)]),
+                   np.concatenate(cs or [np.zeros(0, CLUSTER.dtype)]),
+                   np.asarray(ranges, np.uint32).reshape(-1, 2), meshes)
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.vertices.nbytes + self.normals.nbytes + self.triangles.nbytes + self.clusters.nbytes)
+
+
+@dataclass
+class MeshInstances:
+    inst_f: np.ndarray      # float32 [n, INSTANCE_F.length]
+    inst_u: np.ndarray      # uint32 [n, INSTANCE_U.length]
+    materials: np.ndarray   # float32 [n, MATERIAL.length]
+    scales: np.ndarray      # float32 [n]: largest singular value of each model's 3x3 part
+    batches: list           # (mesh index, first instance, count)
+
+    @classmethod
+    def pack(cls, objects, mesh_index) -> "MeshInstances":
+        """``objects``: MeshObjects (paramlod.scene.scene); ``mesh_index(mesh) -> int``."""
+        fs, us, ms, ss, batches, at = [], [], [], [], [], 0
+        for o in objects:
+            models = np.broadcast_to(o.transform, (o.count, 4, 4)) if o.transforms is None else o.transform @ o.transforms
+            models = np.asarray(models, np.float64)
+            lin = models[:, :3, :3]
+            if np.any(np.abs(np.linalg.det(lin)) < 1e-20):
+                raise SceneError(f"mesh '{o.mesh.name}': an instance transform is singular")
+            n = len(models)
+            f = np.zeros((n, INSTANCE_F.length), np.float32)
+            f[:, INSTANCE_F.slice("model")] = models.reshape(n, 16)
+            nrm = np.transpose(np.linalg.inv(lin), (0, 2, 1))
+            f[:, INSTANCE_F.slice("normal")] = np.concatenate([nrm, np.zeros((n, 3, 1))], axis=2).reshape(n, 12)
+            u = np.zeros((n, INSTANCE_U.length), np.uint32)
+            u[:, INSTANCE_U.offset("func")] = mesh_index(o.mesh)
+            u[:, INSTANCE_U.offset("object")] = o.object_id
+            sv = np.linalg.svd(lin, compute_uv=False)
+            u[:, INSTANCE_U.offset("flags")] = (np.where(sv[:, 2] >= sv[:, 0] * (1 - 1e-4), SIMILAR, 0)
+                                                | np.where(np.linalg.det(lin) < 0, MIRRORED, 0))
+            mat = np.tile(np.array([*o.material.color, o.material.specular], np.float32), (n, 1))
+            if o.colors is not None:
+                mat[:, :3] = o.colors
+            fs.append(f)
+            us.append(u)
+            ms.append(mat)
+            ss.append(sv[:, 0].astype(np.float32))
+            batches.append((mesh_index(o.mesh), at, n))
+            at += n
+        return cls(np.concatenate(fs or [np.zeros((0, INSTANCE_F.length), np.float32)]),
+                   np.concatenate(us or [np.zeros((0, INSTANCE_U.length), np.uint32)]),
+                   np.concatenate(ms or [np.zeros((0, MATERIAL.length), np.float32)]),
+                   np.concatenate(ss or [np.zeros(0, np.float32)]), batches)
+
+    def __len__(self) -> int:
+        return len(self.inst_f)
+
+
+class DeviceMeshes:
+    """Device copies of a MeshArrays and a MeshInstances (OpenCL buffers, read-only)."""
+
+    def __init__(self, arrays: MeshArrays, instances: MeshInstances):
+        ctx = cl_device().context
+        mf = cl.mem_flags
+
+        def up(a):
+            a = np.ascontiguousarray(a)
+            return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a if a.nbytes else np.zeros(4, np.uint32))
+
+        self.arrays, self.instances = arrays, instances
+        self.vertices, self.normals = up(arrays.vertices), up(arrays.normals)
+        self.triangles, self.clusters = up(arrays.triangles), up(arrays.clusters)
+        self.inst_f, self.inst_u = up(instances.inst_f), up(instances.inst_u)
+        self.materials, self.scales = up(instances.materials), up(instances.scales)
+
+    @property
+    def nbytes(self) -> int:
+        i = self.instances
+        return self.arrays.nbytes + int(i.inst_f.nbytes + i.inst_u.nbytes + i.materials.nbytes + i.scales.nbytes)

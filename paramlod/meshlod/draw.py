@@ -1,0 +1,281 @@
+"""The meshlets-gl draw: the clusters the cut selected, drawn by OpenGL 4.5 with indirect draws, into
+the renderers kit's GL targets (paramlod.renderers.gl_targets: noAA, MSAA, SSAA or both, resolved
+to a Frame like the tess variant's, so paramlod.pipeline.composite merges the two).
+
+Driven per scene state: ``MeshDraw.upload(arrays, instances)`` when the scene's meshes or instances
+change, then ``MeshDraw.draw(selection, camera, ...)`` every frame with the cut's (instance,
+cluster) pairs read back from the device. Its OpenCL counterpart is the meshlets rasterizer; both
+draw the same selection with the same shading body (kernels/common/shading.cl) and debug colours
+(kernels/meshlod/debug_color.cl).
+
+One draw command per selected pair k: (count = 3 * the cluster's triangles, instanceCount = 1,
+firstIndex = 3 * its first triangle, baseVertex = 0, baseInstance = k), all issued by one
+glMultiDrawElementsIndirect over the scene's global index buffer. baseInstance = k rather than
+the instance index because an instanced attribute of divisor 1 over the selection buffer then
+reads the command's own (instance, cluster) pair in core GL >= 4.2, with no extension (llvmpipe
+and NVIDIA both have ARB_shader_draw_parameters, but a per-draw cluster index would still need a
+second lookup); the instance's records and the cluster's level come from storage buffers.
+Shaders: kernels/meshlod/mesh_{common,vertex,fragment}.glsl.
+"""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+
+import moderngl
+import numpy as np
+
+from paramlod import kernels
+from paramlod.core.camera import Camera
+from paramlod.core.frame import Frame, FrameStats
+from paramlod.core.layouts import INSTANCE_U, glsl_prelude
+from paramlod.device.context import gl_cache, gl_context
+from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
+from paramlod.errors import DeviceError, MeshError
+from paramlod.meshlod.buffers import MeshArrays, MeshInstances
+from paramlod.renderers.gl_targets import GLTargets, effective_aa, targets_for
+from paramlod.renderers.shading import LIGHT
+
+COLOR_BY = {0: "material", 1: "cluster", 2: "level"}
+COMMAND_DTYPE = np.dtype([("count", np.uint32), ("instances", np.uint32), ("first", np.uint32),
+                          ("base_vertex", np.int32), ("base_instance", np.uint32)])   # DrawElementsIndirectCommand
+
+
+def _program(ctx, color_by: int):
+    """The draw program for debug colouring ``color_by``, cached with the GL context."""
+    programs = gl_cache(ctx).setdefault("meshlod_draw_programs", {})
+    prog = programs.get(color_by)
+    if prog is None:
+        head = f"#version 450 core\n#define PL_COLOR_BY {color_by}\n"
+        common = [glsl_prelude(), kernels.source("meshlod/mesh_common.glsl")]
+        # the debug colours are snippet dialect: the dialect first, then them, then the stage
+        debug = [kernels.source("common/dialect.glsl"), kernels.source("meshlod/debug_color.cl")] if color_by else []
+        stages = {"vertex_shader": head + "\n".join([*common, kernels.source("meshlod/mesh_vertex.glsl")]),
+                  "fragment_shader": head + "\n".join([*common, *debug, kernels.source("meshlod/mesh_fragment.glsl")])}
+        try:
+            prog = ctx.program(**stages)
+        except moderngl.Error as exc:
+            log = str(exc)
+            stage = next((k for k in stages if k in log), "fragment_shader")
+            raise DeviceError(f"the mesh draw's shaders do not compile on {ctx.info.get('GL_RENDERER')} "
+                              f"({stage}):\n{context_lines(stages[stage], log, GLSL_LINE)}\n"
+                              f"compiler said:\n{log[-2000:]}") from None
+        programs[color_by] = prog
+    return prog
+
+
+def _mat(m) -> np.ndarray:
+    """A row-major 4x4 matrix as GLSL's column-major mat4 bytes."""
+    return np.ascontiguousarray(np.asarray(m, np.float64).T, np.float32)
+
+
+class _GrowBuffer:
+    """A GL buffer replaced by a bigger one (a power of two) when data does not fit."""
+
+    def __init__(self, ctx, nbytes: int = 16):
+        self.ctx, self.buf, self.generation = ctx, ctx.buffer(reserve=max(16, nbytes)), 0
+
+    def write(self, data: bytes):
+        if len(data) > self.buf.size:
+            self.buf.release()
+            self.buf = self.ctx.buffer(reserve=1 << int(math.ceil(math.log2(len(data)))))
+            self.generation += 1
+        if data:
+            self.buf.write(data)
+
+
+class MeshDraw:
+    """GL buffers of one scene's meshes and instances, and the per-frame draw of a selection."""
+
+    def __init__(self):
+        self.ctx = gl_context()
+        self.arrays: MeshArrays | None = None
+        self.instances: MeshInstances | None = None
+        self._targets: GLTargets | None = None
+        self._picks = _GrowBuffer(self.ctx, 1024)
+        self._commands = _GrowBuffer(self.ctx, 1024)
+        self._static: list = []
+        self._vaos: dict = {}
+
+    # --- scene data -------------------------------------------------------------------------
+    def upload(self, arrays: MeshArrays, instances: MeshInstances) -> None:
+        """Copy the scene's packed meshes and instances into GL buffers (vertex, index and storage
+        buffers); call again when they change."""
+        if not isinstance(arrays, MeshArrays) or not isinstance(instances, MeshInstances):
+            raise MeshError("MeshDraw.upload needs a paramlod.meshlod.buffers.MeshArrays and a MeshInstances "
+                            f"(MeshArrays.pack / MeshInstances.pack), got {type(arrays).__name__} and "
+                            f"{type(instances).__name__}")
+        if len(instances) and int(instances.inst_u[:, INSTANCE_U.offset("func")].max()) >= len(arrays.ranges):
+            raise MeshError(f"MeshDraw.upload: an instance names mesh {int(instances.inst_u[:, 0].max())} but the "
+                            f"MeshArrays hold {len(arrays.ranges)} meshes; pack both from the same scene")
+        self._release_static()
+        ctx = self.ctx
+
+        def buf(a):
+            a = np.ascontiguousarray(a)
+            return ctx.buffer(a.tobytes() if a.nbytes else bytes(16))
+
+        try:
+            self._vertices = buf(arrays.vertices.astype(np.float32, copy=False))
+            self._normals = buf(arrays.normals.astype(np.float32, copy=False))
+            self._indices = buf(arrays.triangles.astype(np.uint32, copy=False).reshape(-1))
+            self._inst_f = buf(instances.inst_f.astype(np.float32, copy=False))
+            self._inst_u = buf(instances.inst_u.astype(np.uint32, copy=False))
+            self._materials = buf(instances.materials.astype(np.float32, copy=False))
+            self._clusters = buf(arrays.clusters)
+        except Exception as exc:   # moderngl.Error: out of memory
+            self._release_static()
+            raise MeshError(f"the scene's meshes ({arrays.nbytes / 2**20:.1f} MiB) do not fit the OpenGL device's "
+                            f"memory: {exc}; draw fewer or smaller meshes") from None
+        self._static = [self._vertices, self._normals, self._indices, self._inst_f, self._inst_u,
+                        self._materials, self._clusters]
+        # per cluster, the command's index count and first index: a frame only gathers them
+        self._index_count = (3 * arrays.clusters["count"]).astype(np.uint32)
+        self._index_first = (3 * arrays.clusters["first"]).astype(np.uint32)
+        self.arrays, self.instances = arrays, instances
+
+    def _release_static(self):
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        for b in self._static:
+            b.release()
+        self._static = []
+
+    def release(self):
+        """Give back every GL object (the draw cannot be used afterwards)."""
+        self._release_static()
+        for b in (self._picks, self._commands):
+            b.buf.release()
+        if self._targets is not None:
+            self._targets.release()
+            self._targets = None
+
+    def _vao(self, prog):
+        key = (id(prog), self._picks.generation)
+        vao = self._vaos.get(key)
+        if vao is None:
+            for k in [k for k in self._vaos if k[0] == id(prog)]:   # made for a released pick buffer
+                self._vaos.pop(k).release()
+            vao = self._vaos[key] = self.ctx.vertex_array(
+                prog, [(self._vertices, "4f", "in_position"), (self._normals, "4f", "in_normal"),
+                       (self._picks.buf, "2u/i", "in_pick")],
+                index_buffer=self._indices, index_element_size=4)
+        return vao
+
+    # --- a frame ----------------------------------------------------------------------------
+    def _check(self, selection, camera, color_by, light, background):
+        if self.arrays is None:
+            raise MeshError("MeshDraw.draw before MeshDraw.upload: upload the scene's MeshArrays and MeshInstances first")
+        if not isinstance(camera, Camera):
+            raise MeshError(f"MeshDraw.draw needs a paramlod Camera, got {type(camera).__name__}")
+        if color_by not in COLOR_BY:
+            raise MeshError(f"color_by must be 0 (material), 1 (per cluster) or 2 (per LOD level), got {color_by!r}")
+        sel = np.asarray(selection)
+        if sel.size == 0:
+            sel = sel.reshape(0, 2)
+        if sel.ndim != 2 or sel.shape[1] != 2 or not np.issubdtype(sel.dtype, np.integer):
+            raise MeshError(f"the selection must be an integer array of (instance, cluster) pairs, shape [n, 2]; "
+                            f"got {sel.dtype} of shape {sel.shape}")
+        if sel.size and (sel.min() < 0 or sel.max() >= 2 ** 32):
+            raise MeshError("the selection holds negative or over 32-bit indices; it must be the cut's uint32 pairs")
+        sel = np.ascontiguousarray(sel, np.uint32)
+        inst, clus = sel[:, 0], sel[:, 1]
+        if len(sel):
+            if int(inst.max()) >= len(self.instances):
+                raise MeshError(f"the selection names instance {int(inst.max())} but {len(self.instances)} were "
+                                "uploaded; was the cut made for this scene?")
+            if int(clus.max()) >= len(self.arrays.clusters):
+                raise MeshError(f"the selection names cluster {int(clus.max())} but the meshes have "
+                                f"{len(self.arrays.clusters)}; was the cut made for this scene?")
+            r = self.arrays.ranges[self.instances.inst_u[inst, INSTANCE_U.offset("func")]]
+            wrong = (clus < r[:, 0]) | (clus >= r[:, 0] + r[:, 1])
+            if wrong.any():
+                k = int(np.flatnonzero(wrong)[0])
+                raise MeshError(f"selection pair {k} draws cluster {int(clus[k])} with instance {int(inst[k])}, "
+                                "whose mesh does not own that cluster; was the cut made for this scene?")
+        light = LIGHT if light is None else tuple(float(x) for x in light)
+        if len(light) != 4 or not all(math.isfinite(x) for x in light):
+            raise MeshError(f"light must be (towards x, y, z, ambient) as paramlod.renderers.shading.LIGHT, got {light!r}")
+        background = tuple(float(x) for x in background)
+        if len(background) != 3:
+            raise MeshError(f"background must be linear RGB (r, g, b), got {background!r}")
+        return sel, light, background
+
+    def draw(self, selection: np.ndarray, camera: Camera, aa: str | None = None, color_by: int = 0,
+             light=None, background=(0.0, 0.0, 0.0)) -> Frame:
+        """Draw the (instance, cluster) pairs of ``selection`` (uint32 [n, 2], the cut's output)
+        seen by ``camera`` with anti-aliasing ``aa`` (paramlod.renderers.aa.parse_aa; None =
+        noAA); ``color_by`` 0/1/2 colours by material, cluster or LOD level; ``light`` is the
+        light record (default paramlod.renderers.shading.LIGHT). Returns a host Frame."""
+        sel, light, background = self._check(selection, camera, color_by, light, background)
+        req, eff, notes = effective_aa(self.ctx, "noAA" if aa is None else aa)
+        for msg in notes:
+            warnings.warn(msg, RuntimeWarning, stacklevel=2)
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        prog = _program(ctx, int(color_by))
+        w, h = camera.size
+        tg, self._targets = self._targets, None   # not kept when making new ones fails
+        tg = self._targets = targets_for(tg, ctx, (w, h), eff.ss, eff.msaa, "mesh draw")
+        t1 = time.perf_counter()
+
+        n = len(sel)
+        cmd = np.zeros(n, COMMAND_DTYPE)
+        cmd["count"] = self._index_count[sel[:, 1]]
+        cmd["instances"] = 1
+        cmd["first"] = self._index_first[sel[:, 1]]
+        cmd["base_instance"] = np.arange(n, dtype=np.uint32)
+        self._picks.write(sel.tobytes())
+        self._commands.write(cmd.tobytes())
+        t2 = time.perf_counter()
+
+        set_uniform(prog, "u_view", _mat(camera.view))
+        set_uniform(prog, "u_proj", _mat(camera.projection))
+        set_uniform(prog, "u_light", light)
+        for binding, b in enumerate((self._inst_f, self._inst_u, self._materials, self._clusters)):
+            b.bind_to_storage_buffer(binding)
+        tg.begin()
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)   # two-sided
+        triangles = 0
+        if n:
+            query = ctx.query(primitives=True)
+            with query:
+                self._vao(prog).render_indirect(self._commands.buf, mode=moderngl.TRIANGLES, count=n)
+            triangles = int(query.primitives)
+        ctx.finish()
+        t3 = time.perf_counter()
+        device_samples = tg.resolve()
+        t4 = time.perf_counter()
+        color, depth, normal, ids = tg.read()
+        t5 = time.perf_counter()
+        if device_samples != eff.msaa:
+            notes.append(f"the device allocated {device_samples} samples per pixel for a {eff.msaa}-sample "
+                         "request; coverage and the depth/id resolve use all of them")
+        stats = FrameStats({
+            "device": ctx.info.get("GL_RENDERER"),
+            "variant": "meshlets-gl",
+            "size": [w, h],
+            "aa": req.name,
+            "aa_effective": eff.name,
+            "msaa_requested": req.msaa,
+            "msaa_samples": eff.msaa,
+            "msaa_samples_device": device_samples,
+            "ssaa": eff.ss,
+            "supersample": eff.ss,
+            "samples_per_pixel": eff.samples_per_pixel,
+            "color_by": COLOR_BY[int(color_by)],
+            "clusters": n,
+            "triangles_selected": int(cmd["count"].sum(dtype=np.int64)) // 3,
+            "triangles": triangles,
+            "draw_calls": 1 if n else 0,
+            "draw_commands": n,
+            "pixels_written": int(np.count_nonzero(np.isfinite(depth))),
+            "warnings": list(notes),
+            "ms": {"setup": (t1 - t0) * 1e3, "upload": (t2 - t1) * 1e3, "render": (t3 - t2) * 1e3,
+                   "draw": (t3 - t2) * 1e3, "resolve": (t4 - t3) * 1e3, "readback": (t5 - t4) * 1e3,
+                   "frame": (t4 - t0) * 1e3, "total": (t5 - t0) * 1e3},
+        })
+        return Frame(color=color, depth=depth, normal=normal, object_id=ids, stats=stats, background=background)
