@@ -32,3 +32,19 @@ def test_bench_measures_supersampled_points(tmp_path):
 def test_bench_names_unknown_scenarios(tmp_path, capsys):
     assert main(["bench", "teapot", "--out", str(tmp_path)]) == 2
     assert "unknown scenario(s) teapot" in capsys.readouterr().err
+
+
+def test_bench_measures_meshes_with_and_without_lod(tmp_path):
+    assert main(["bench", "sphere", "--variants", "points", "--size", "64x48", "--distances", "1", "--frames", "2",
+                 "--warmup", "1", "--extras", "meshes", "--mesh-grid", "2", "--out", str(tmp_path)]) == 0
+    m = json.loads((tmp_path / "results.json").read_text())["meshes"]
+    assert m["builds"][0]["mesh"] == "bunny" and m["builds"][0]["triangles"] == 99_785 and m["builds"][0]["roots"] <= 4
+    rows = {(r["scenario"], r["variant"], r["threshold_px"]): r for r in m["scenarios"]}
+    assert len(rows) == 8
+    for scenario in ("mesh_grid", "mesh_path"):
+        for variant in ("meshlets", "meshlets-gl"):
+            lod, full = rows[scenario, variant, 1.0], rows[scenario, variant, 0.0]
+            assert 0 < lod["triangles_drawn"] < full["triangles_drawn"]
+            assert lod["triangle_ratio_vs_full"] > 1
+    assert m["cut_alone"][0]["tests"] >= 10 ** 6 * 0.9
+    assert "## Meshes" in (tmp_path / "results.md").read_text()

@@ -124,9 +124,10 @@ def cut_alone(lod, instances: int, size, repeats: int = 10) -> dict:
             "cut_ms": statistics.median(times), "tests_per_s": tests / (statistics.median(times) * 1e-3)}
 
 
-def run_meshes(size, frames: int, warmup: int, big: bool, log=print) -> dict:
-    """Every mesh measurement; ``big``: also the 1.6 M-triangle mesh (a GPU's job)."""
-    out = {"builds": [], "scenarios": []}
+def run_meshes(size, frames: int, warmup: int, big: bool, grid: int = 10, log=print) -> dict:
+    """Every mesh measurement; ``big``: also the 1.6 M-triangle mesh (a GPU's job); ``grid``: copies
+    per side of the grid scenario (Smělý: 10)."""
+    out = {"builds": [], "scenarios": [], "grid": grid}
     for name, v, f, n in bench_meshes(big):
         t0 = time.perf_counter()
         lod = build_dag(v, f, n, name=name)
@@ -135,8 +136,7 @@ def run_meshes(size, frames: int, warmup: int, big: bool, log=print) -> dict:
         out["builds"].append({"mesh": name, "triangles": int(len(f)), "seconds": secs, "levels": info["levels"],
                               "clusters": info["clusters"], "roots": info["roots"], "bytes": info["bytes"]})
         log(f"build {name}: {len(f):,} triangles in {secs:.2f} s, {info['levels']} levels, {info['roots']} roots")
-        grid = grid_scene(lod)
-        for scenario, scene, cams in (("mesh_grid", grid, grid_cameras(frames, size)),
+        for scenario, scene, cams in (("mesh_grid", grid_scene(lod, grid), grid_cameras(frames, size)),
                                       ("mesh_path", _one(lod), path_cameras(frames, size))):
             for variant in MESH_VARIANTS:
                 pair = {}
@@ -166,7 +166,7 @@ def _one(lod) -> Scene:
     return s
 
 
-def format_meshes(res: dict, atomics_per_s: float | None) -> list[str]:
+def format_meshes(res: dict, atomics_per_s: float | None, raster_per_s: float | None = None) -> list[str]:
     lines = ["", "## Meshes", "", "| mesh | triangles | build s | levels | clusters | roots | MiB |",
              "|---|---:|---:|---:|---:|---:|---:|"]
     for b in res["builds"]:
@@ -180,13 +180,16 @@ def format_meshes(res: dict, atomics_per_s: float | None) -> list[str]:
             lines.append(f"| {r['scenario']} | {r['mesh']} | {r['variant']} | {r['threshold_px']:g} | error: {r['error']} |")
             continue
         tps = r.get("triangles_per_s")
+        ratios = [f"{r[k]:.1f}" if k in r else "-" for k in ("speedup_vs_full", "triangle_ratio_vs_full")]
         lines.append(f"| {r['scenario']} | {r['mesh']} | {r['variant']} | {r['threshold_px']:g} | {r['frame_ms']:.2f} | "
                      f"{r['cut_ms']:.3f} | {r['raster_ms']:.2f} | {r['clusters_drawn']:,.0f} | "
-                     f"{r['triangles_drawn']:,.0f} | {f'{tps / 1e9:.2f} G' if tps else '-'} | "
-                     f"{r.get('speedup_vs_full', float('nan')):.1f} | {r.get('triangle_ratio_vs_full', float('nan')):.1f} |")
+                     f"{r['triangles_drawn']:,.0f} | {f'{tps / 1e6:,.0f} M' if tps else '-'} | {ratios[0]} | {ratios[1]} |")
     for c in res.get("cut_alone", []):
         lines.append(f"\nCut alone ({c['mesh']}): {c['tests']:,} cluster tests ({c['instances']} instances x "
                      f"{c['clusters_per_instance']:,} clusters) in {c['cut_ms']:.3f} ms ({c['tests_per_s'] / 1e9:.2f} G/s).")
     if atomics_per_s:
         lines.append(f"Random 64-bit atom_min ceiling in the same run: {atomics_per_s / 1e9:.2f} G/s.")
+    if raster_per_s:
+        lines.append(f"Hardware rasterization ceiling in the same run (tessellated triangles, level 64): "
+                     f"{raster_per_s / 1e9:.2f} G triangles/s.")
     return lines

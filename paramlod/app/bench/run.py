@@ -65,6 +65,7 @@ def add_arguments(p):
                    choices=["ceilings", "functions", "surfels", "meshes"], help="extra measurements (default all)")
     p.add_argument("--big-mesh", choices=["auto", "yes", "no"], default="auto",
                    help="also measure a 1.6 M-triangle mesh (default: on a GPU only)")
+    p.add_argument("--mesh-grid", type=int, default=10, help="copies per side of the mesh grid (default 10)")
     p.add_argument("--out", default="out/bench", help="folder for results (default out/bench)")
 
 
@@ -280,7 +281,7 @@ def run_bench(args) -> int:
     if "ceilings" in args.extras:
         result["atomics_ceiling_per_s"] = atomics_ceiling(*size)
         print(f"random 64-bit atom_min: {result['atomics_ceiling_per_s'] / 1e9:.2f} G/s", flush=True)
-        if any(VARIANTS[v][0] == "tess" for v in args.variants):
+        if any(VARIANTS[v][0] == "tess" for v in args.variants) or "meshes" in args.extras:
             result["tess_ceiling"] = tess_ceiling(size)
             print(f"tessellation, level 64: {_rate(result['tess_ceiling']['triangles_per_s'])} triangles/s",
                   flush=True)
@@ -315,7 +316,8 @@ def run_bench(args) -> int:
         save()
     if "meshes" in args.extras:
         big = args.big_mesh == "yes" or (args.big_mesh == "auto" and dev.is_gpu)
-        result["meshes"] = run_meshes(size, args.frames, args.warmup, big, log=lambda m: print(m, flush=True))
+        result["meshes"] = run_meshes(size, args.frames, args.warmup, big, args.mesh_grid,
+                                      log=lambda m: print(m, flush=True))
         save()
     md = format_markdown(result)
     write_atomically(out / "results.md", lambda tmp: Path(tmp).write_text(md))
@@ -366,7 +368,7 @@ def format_markdown(result) -> str:
         lines += ["", "| prefix | render ms |", "|---:|---:|"]
         lines += [f"| {r['prefix']:,} | {r['ms']:.3f} |" for r in s["render"]]
     if "meshes" in result:
-        lines += format_meshes(result["meshes"], ceil)
+        lines += format_meshes(result["meshes"], ceil, result.get("tess_ceiling", {}).get("triangles_per_s"))
     return "\n".join(lines) + "\n"
 
 
