@@ -36,7 +36,8 @@ def test_bench_names_unknown_scenarios(tmp_path, capsys):
 
 def test_bench_measures_meshes_with_and_without_lod(tmp_path):
     assert main(["bench", "sphere", "--variants", "points", "--size", "64x48", "--distances", "1", "--frames", "2",
-                 "--warmup", "1", "--extras", "meshes", "--mesh-grid", "2", "--out", str(tmp_path)]) == 0
+                 "--warmup", "1", "--extras", "meshes", "--mesh-grid", "2", "--big-mesh", "no",
+                 "--out", str(tmp_path)]) == 0
     m = json.loads((tmp_path / "results.json").read_text())["meshes"]
     assert m["builds"][0]["mesh"] == "bunny" and m["builds"][0]["triangles"] == 99_785 and m["builds"][0]["roots"] <= 4
     rows = {(r["scenario"], r["variant"], r["threshold_px"]): r for r in m["scenarios"]}
