@@ -16,7 +16,8 @@ import numpy as np
 
 import pyopencl as cl
 
-from paramlod.core.camera import Camera
+# pixel_world_size: the law's pixel size, re-exported (its home is paramlod.core.camera)
+from paramlod.core.camera import Camera, pixel_world_size, sphere_depth, transform_scale  # noqa: F401
 from paramlod.core.color import srgb_to_linear
 from paramlod.core.frame import FrameStats
 from paramlod.core.layouts import camera_record
@@ -25,6 +26,7 @@ from paramlod.device.programs import kernel
 from paramlod.renderers.registry import ObjectKind, RendererSpec, register_kind, register_renderer
 from paramlod.renderers.shading import LIGHT
 from paramlod.renderers.targets import KeyBuffer
+from paramlod.scene.handoff import DEFAULT_SIZE_PX, mesh_weight, prefix_radius
 from paramlod.scene.loaders import register_loader
 
 from paramlod.errors import SurfelError
@@ -40,7 +42,7 @@ COUNTERS = ("surfels_drawn", "atomics", "pixels_covered", "surfels_not_finite")
 @dataclass
 class FixedSize:
     """Surfels of ``size_px`` pixels at the object's distance (the default strategy)."""
-    size_px: float = 2.0
+    size_px: float = DEFAULT_SIZE_PX
 
     def __post_init__(self):
         if not (np.isfinite(self.size_px) and 0.1 <= self.size_px <= 256):
@@ -101,24 +103,10 @@ class FrameTimeAdaptive:
             self.update(elapsed_ms)
 
 
-def pixel_world_size(camera, depth: float) -> float:
-    """World size of one pixel (vertically) at view depth ``depth``."""
-    p = camera.projection
-    w = -p[3, 2] * depth + p[3, 3]          # clip w of a point at that depth (z = -depth)
-    return float(2.0 * w / (p[1, 1] * camera.height))
-
-
 def object_depth(camera, surfels: SurfelSet, transform) -> float:
     """View depth of the nearest point of the object's bounding sphere (at least the near plane)."""
     c, r = surfels.bounding_sphere()
-    m = camera.view @ transform
-    cv = m[:3, :3] @ c + m[:3, 3]
-    s = _scale(transform)
-    return float(max(-cv[2] - r * s, camera.near))
-
-
-def _scale(transform) -> float:
-    return float(abs(np.linalg.det(transform[:3, :3])) ** (1.0 / 3.0))
+    return sphere_depth(camera, c, r, transform)
 
 
 def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None) -> dict:
@@ -131,9 +119,7 @@ def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None) -> 
         r = surfels.spacing(n)
         return {"prefix": n, "radius": r, "size_px": None, "saturated": strategy.count > N}
     size = strategy.size()
-    depth = object_depth(camera, surfels, transform)
-    r_world = size * pixel_world_size(camera, depth) / 2.0
-    r = r_world / _scale(transform)          # object units
+    r, depth = prefix_radius(camera, surfels, size, transform)   # object units; the hand-off's weight uses it too
     n = surfels.prefix_for_spacing(r)
     # asking for N (1 + 1e-9) surfels is asking for N: the camera's roundoff must not flip it
     saturated = surfels.packing / (r * r) > N * (1 + 1e-9)
@@ -199,12 +185,17 @@ class SurfelSplats:
         self.objects, self.camera = list(scene.surfels), camera
 
     def enqueue(self, target, settings=None):
+        # computed here, each frame, for this pass's camera: the mesh renderer computes the same
+        # weight for its instance (paramlod.scene.handoff), so the two split the pixels
         self._splats = [self.splat(target, self.camera, so.surfels, so.strategy or FixedSize(), so.transform,
-                                   so.object_id, so.specular)
+                                   so.object_id, so.specular, mesh_weight=mesh_weight(self.camera, so))
                         for so in self.objects]
 
-    def splat(self, keys, camera, surfels, strategy, transform, object_id, specular, light=None) -> _Splat:
-        """Enqueue the splat of one set's prefix into ``keys`` (no wait)."""
+    def splat(self, keys, camera, surfels, strategy, transform, object_id, specular, light=None,
+              mesh_weight: float = 0.0) -> _Splat:
+        """Enqueue the splat of one set's prefix into ``keys`` (no wait). ``mesh_weight`` in
+        [0, 1]: the hand-off mesh's share; pixels whose dither is below it are left out (1: no
+        surfel is splatted)."""
         if (keys.width, keys.height) != tuple(camera.size):
             raise SurfelError(f"the key buffer is {keys.width}x{keys.height} but the camera is "
                               f"{camera.size[0]}x{camera.size[1]}")
@@ -213,7 +204,11 @@ class SurfelSplats:
         transform = np.eye(4) if transform is None else np.asarray(transform, np.float64)
         if transform.shape != (4, 4) or not np.all(np.isfinite(transform)) or abs(np.linalg.det(transform[:3, :3])) < 1e-12:
             raise SurfelError("surfel transform must be a finite, invertible 4x4 matrix")
-        choice = choose_prefix(surfels, camera, strategy, transform)
+        w = float(mesh_weight)
+        if not 0.0 <= w <= 1.0:
+            raise SurfelError(f"mesh_weight must be in [0, 1] (the hand-off mesh's share of the pixels), "
+                              f"got {mesh_weight!r}")
+        choice = dict(choose_prefix(surfels, camera, strategy, transform), mesh_weight=w)
         dev = self.device_copy(surfels)
         q, ctx = cl_device().queue, cl_device().context
         xf, inv_proj = draw_records(camera, transform)
@@ -222,11 +217,11 @@ class SurfelSplats:
                  (xf, camera_record(camera), inv_proj, np.asarray(LIGHT if light is None else light, np.float32))]
         counters = np.zeros(len(COUNTERS), np.uint64)
         cbuf = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=counters)
-        n = choice["prefix"]
-        radius_view = np.float32(choice["radius"] * _scale(transform))
+        n = 0 if w >= 1.0 else choice["prefix"]   # the mesh draws every pixel: nothing to splat
+        radius_view = np.float32(choice["radius"] * transform_scale(transform))
         k = kernel("surfels_splat", ["common/keys.cl", "surfels/surfels_splat.cl"], options=EXACT_DIVISION)
         evt = k(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view, *small,
-                np.float32(specular), np.uint32(object_id), keys.color, keys.aux, cbuf)
+                np.float32(specular), np.uint32(object_id), np.float32(w), keys.color, keys.aux, cbuf)
         return _Splat(choice, strategy, len(surfels), radius_view, evt, counters, cbuf)
 
     def collect(self):

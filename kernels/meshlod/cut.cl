@@ -13,6 +13,8 @@
 // [2] culled by the frustum, [3] culled by the backface cone, [4] cluster tests made.
 // Each work-group sums its counts in local memory and reserves its range of the selection with
 // one global atomic, so the counters see one atomic per group and counter, not per cluster.
+// An instance whose hand-off weight (`weights`, paramlod/scene/handoff.py) is 0 selects nothing and
+// makes no tests: its surfels draw every pixel (a group holds one instance).
 #pragma OPENCL FP_CONTRACT OFF
 
 // the cut camera record, passed by value with the launch (no buffer write per frame)
@@ -65,20 +67,22 @@ inline bool cut_backfacing(float4 apex, float4 cone, __global const float* inst,
 __kernel __attribute__((reqd_work_group_size(CUT_LOCAL, 1, 1)))
 void cluster_cut(__global const Cluster* clusters, uint first_cluster, uint n_clusters, uint first_instance,
                  __global const float* inst_f, __global const uint* inst_u, __global const float* scales,
-                 const CutCamera cam, uint mode,
+                 __global const float* weights, const CutCamera cam, uint mode,
                  __global uint2* selection, uint capacity, __global ulong* counters)
 {
     __local uint l_sel, l_tri, l_fr, l_bf;
     __local ulong l_base;
+    uint inst = first_instance + (uint)get_global_id(1);
+    // no early return: PoCL's work-group loops need every work-item to reach the barriers
+    bool live = weights[inst] > 0.0f;
     const float* cc = cam.v;
     uint lid = get_local_id(0);
     if (lid == 0) { l_sel = 0; l_tri = 0; l_fr = 0; l_bf = 0; }
     barrier(CLK_LOCAL_MEM_FENCE);
 
     uint c = get_global_id(0);
-    uint inst = first_instance + (uint)get_global_id(1);
     uint slot = 0xFFFFFFFFu;
-    if (c < n_clusters) {
+    if (c < n_clusters && live) {
         __global const Cluster* cl = clusters + first_cluster + c;
         __global const float* I = inst_f + (size_t)inst * INST_F;
         __global const float* m = I + INST_MODEL;
@@ -102,7 +106,7 @@ void cluster_cut(__global const Cluster* clusters, uint first_cluster, uint n_cl
     barrier(CLK_LOCAL_MEM_FENCE);
     if (lid == 0) {
         uint start = (uint)get_group_id(0) * CUT_LOCAL;
-        uint tests = start < n_clusters ? min((uint)CUT_LOCAL, n_clusters - start) : 0u;
+        uint tests = start < n_clusters && live ? min((uint)CUT_LOCAL, n_clusters - start) : 0u;
         l_base = l_sel ? atom_add(&counters[0], (ulong)l_sel) : 0;
         if (l_tri) atom_add(&counters[1], (ulong)l_tri);
         if (l_fr) atom_add(&counters[2], (ulong)l_fr);

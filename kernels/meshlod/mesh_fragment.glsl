@@ -6,6 +6,11 @@
 // PL_COLOR_BY (MeshDraw.draw's color_by): 0 the material's colour; 1 a colour per cluster, 2 a
 // colour per LOD level (meshlod/debug_color.cl, which the host puts before this file for 1 and 2),
 // shaded like a material of that colour.
+// Hand-off (paramlod/scene/handoff.py): an object of weight w < 1 (pl_object_weight, indexed by
+// object id: a hand-off mesh is one instance of its own object) keeps only the fragments whose
+// dither is below w, the surfels drawing the others. pl_dither is kernels/common/keys.cl's, copied
+// (keys.cl is OpenCL only), on the target's grid with rows counted from the top as the key
+// buffers count them; numpy twin: paramlod.scene.handoff.dither.
 centroid in vec3 ms_view;
 centroid in vec3 ms_normal;
 flat in vec4 ms_material;
@@ -19,11 +24,32 @@ layout(location = 2) out vec4 out_normal;
 layout(location = 3) out uint out_object;
 
 uniform vec4 u_light;   // the light record: towards the light in view space (xyz), ambient share (w)
+uniform int u_rows;     // the target's height in pixels (subsamples with SSAA), for rows from the top
+
+layout(std430, binding = 4) readonly buffer PlObjectWeights { float pl_object_weight[]; };   // [4096]
+
+uint pl_dither_hash(uint x) {
+    x = x ^ (x >> 16);
+    x = x * 0x7feb352du;
+    x = x ^ (x >> 15);
+    x = x * 0x846ca68bu;
+    x = x ^ (x >> 16);
+    return x;
+}
+
+float pl_dither(uint x, uint y) {
+    return float(pl_dither_hash(pl_dither_hash(y) + x) >> 8) * (1.0 / 16777216.0);
+}
 
 #include "common/dialect.glsl"
 #include "common/shading.cl"
 
 void main() {
+    float weight = pl_object_weight[ms_object & 0xFFFu];
+    if (weight < 1.0) {
+        uint x = uint(gl_FragCoord.x), y = uint(u_rows - 1 - int(gl_FragCoord.y));
+        if (!(pl_dither(x, y) < weight)) discard;   // the surfels' pixel
+    }
     vec3 ev = normalize(-ms_view);
     vec3 n = pl_facing_normal(ms_normal, ev);
 #if PL_COLOR_BY == 1

@@ -17,6 +17,9 @@
 // pixels exactly once. Depth and attributes perspective-correct (weights E_i / w_i); depth is the
 // linear view depth, written only inside [near, far]. Shading: keys.cl shade() at each pixel
 // (two-sided: the cut culls back-facing clusters, open scans show their backs).
+// Hand-off (paramlod/scene/handoff.py): an instance of weight w < 1 (`weights`, one float per
+// instance) draws only the pixels whose dither (keys.cl pl_dither) is below w; its surfels draw the
+// others.
 #pragma OPENCL FP_CONTRACT OFF
 
 #include "common/keys.cl"
@@ -207,7 +210,8 @@ inline long rs_edge(const RsTri* t, int i, int x, int y) {
 // Returns 1 when the colour atomic was issued; *covered counts pixels with depth in [near, far].
 inline uint rs_fragment(const RsTri* t, long E0, long E1, long E2, int x, int y,
                         __global const float* cam, __global const float* light, float4 mat, uint object_id,
-                        __global ulong* color_buf, __global ulong* aux_buf, ulong* covered) {
+                        float weight, __global ulong* color_buf, __global ulong* aux_buf, ulong* covered) {
+    if (weight < 1.0f && !(pl_dither((uint)x, (uint)y) < weight)) return 0u;   // the surfels' pixel
     float u0 = (float)E0 * t->iw[0], u1 = (float)E1 * t->iw[1], u2 = (float)E2 * t->iw[2];
     float q = (u0 + u1) + u2;
     float depth = ((u0 * t->d[0] + u1 * t->d[1]) + u2 * t->d[2]) / q;
@@ -243,7 +247,7 @@ __kernel __attribute__((reqd_work_group_size(CLUSTER_MAX_TRIANGLES, 1, 1)))
 void raster_clusters(__global const float4* vertices, __global const float4* normals,
                      __global const uint* triangles, __global const Cluster* clusters,
                      __global const float* inst_f, __global const uint* inst_u,
-                     __global const float4* materials,
+                     __global const float4* materials, __global const float* weights,
                      __global const uint2* selection, uint capacity, __global const ulong* cut_counters,
                      __global const float* cam, __global const float* light, uint color_by, uint large_pixels,
                      __global ulong* color_buf, __global ulong* aux_buf,
@@ -264,6 +268,7 @@ void raster_clusters(__global const float4* vertices, __global const float4* nor
         clipped += near_clipped ? 1 : 0;
         float4 mat = rs_material(materials, inst, cluster, clusters[cluster].level, color_by);
         uint object_id = inst_u[inst * INST_U + INST_OBJECT];
+        float weight = weights[inst];
         bool drawn = false;
         for (int j = 1; j + 1 < nv; ++j) {
             RsTri t;
@@ -280,7 +285,7 @@ void raster_clusters(__global const float4* vertices, __global const float4* nor
                 long E0 = rs_edge(&t, 0, t.x0, y), E1 = rs_edge(&t, 1, t.x0, y), E2 = rs_edge(&t, 2, t.x0, y);
                 for (int x = t.x0; x <= t.x1; ++x) {
                     if (E0 >= t.bias[0] && E1 >= t.bias[1] && E2 >= t.bias[2])
-                        issued += rs_fragment(&t, E0, E1, E2, x, y, cam, light, mat, object_id,
+                        issued += rs_fragment(&t, E0, E1, E2, x, y, cam, light, mat, object_id, weight,
                                               color_buf, aux_buf, &covered);
                     E0 += s0; E1 += s1; E2 += s2;
                 }
@@ -301,7 +306,7 @@ __kernel __attribute__((reqd_work_group_size(RS_LARGE_LOCAL, 1, 1)))
 void raster_large(__global const float4* vertices, __global const float4* normals,
                   __global const uint* triangles, __global const Cluster* clusters,
                   __global const float* inst_f, __global const uint* inst_u,
-                  __global const float4* materials,
+                  __global const float4* materials, __global const float* weights,
                   __global const float* cam, __global const float* light, uint color_by,
                   __global ulong* color_buf, __global ulong* aux_buf,
                   __global const uint4* large, uint large_capacity, __global ulong* counters)
@@ -309,6 +314,7 @@ void raster_large(__global const float4* vertices, __global const float4* normal
     __local RsTri shared_t;
     __local float4 shared_mat;
     __local uint shared_id;
+    __local float shared_weight;
     uint lid = get_local_id(0);
     ulong n = min(counters[RS_LARGE], (ulong)large_capacity);
     ulong covered = 0, issued = 0;
@@ -323,18 +329,20 @@ void raster_large(__global const float4* vertices, __global const float4* normal
             shared_t = t;
             shared_mat = rs_material(materials, item.x, item.y, clusters[item.y].level, color_by);
             shared_id = inst_u[item.x * INST_U + INST_OBJECT];
+            shared_weight = weights[item.x];
         }
         barrier(CLK_LOCAL_MEM_FENCE);
         RsTri t = shared_t;
         float4 mat = shared_mat;
         uint object_id = shared_id;
+        float weight = shared_weight;
         int bw = t.x1 - t.x0 + 1;
         long count = (long)bw * (long)(t.y1 - t.y0 + 1);
         for (long i = lid; i < count; i += RS_LARGE_LOCAL) {
             int x = t.x0 + (int)(i % bw), y = t.y0 + (int)(i / bw);
             long E0 = rs_edge(&t, 0, x, y), E1 = rs_edge(&t, 1, x, y), E2 = rs_edge(&t, 2, x, y);
             if (E0 >= t.bias[0] && E1 >= t.bias[1] && E2 >= t.bias[2])
-                issued += rs_fragment(&t, E0, E1, E2, x, y, cam, light, mat, object_id,
+                issued += rs_fragment(&t, E0, E1, E2, x, y, cam, light, mat, object_id, weight,
                                       color_buf, aux_buf, &covered);
         }
         barrier(CLK_LOCAL_MEM_FENCE);

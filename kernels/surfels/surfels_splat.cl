@@ -2,7 +2,9 @@
 // `radius` (view units) into the shared 64-bit key buffers (keys.cl), so surfels and parametric
 // objects compose by depth in one Frame. Each pixel centre in the disc's conservative screen box
 // casts its camera ray (any projection: through the inverse projection) against the disc's plane.
-// numpy twin: paramlod/surfels/reference.py splat_discs (coverage and depth keys bit-identical).
+// With a hand-off mesh (paramlod/scene/handoff.py) pixels whose dither (keys.cl pl_dither) is below
+// `mesh_weight` are left to the mesh (0: every pixel is the surfels').
+// numpy twin: paramlod/surfels/build/reference.py splat_discs (coverage and depth keys bit-identical).
 #pragma OPENCL FP_CONTRACT OFF
 
 inline float3 sf_point(__global const float* m, float3 p) {
@@ -42,7 +44,7 @@ __kernel void surfels_splat(__global const float4* pos, __global const float4* n
                             __global const float4* albedo, uint n, float radius,
                             __global const float* xf, __global const float* cam,
                             __global const float* inv_proj, __global const float* light,
-                            float specular, uint object_id,
+                            float specular, uint object_id, float mesh_weight,
                             __global ulong* color_buf, __global ulong* aux_buf,
                             __global ulong* counters)
 {
@@ -83,6 +85,7 @@ __kernel void surfels_splat(__global const float4* pos, __global const float4* n
     for (int y = py0; y <= py1; ++y) {
         float ny = 1.0f - ((float)y + 0.5f) / H * 2.0f;
         for (int x = px0; x <= px1; ++x) {
+            if (mesh_weight > 0.0f && pl_dither((uint)x, (uint)y) < mesh_weight) continue;   // the mesh's pixel
             float nx = ((float)x + 0.5f) / W * 2.0f - 1.0f;
             float3 o = sf_unproject(inv_proj, nx, ny, -1.0f);
             float3 d = sf_unproject(inv_proj, nx, ny, 1.0f) - o;

@@ -23,6 +23,7 @@ from paramlod.renderers.registry import KINDS, variants
 from paramlod.renderers.points import PointSettings
 from paramlod.renderers.tess import TessSettings
 from paramlod.scene.framing import framing_camera
+from paramlod.scene.handoff import DEFAULT_BLEND
 from paramlod.scene.scene import Material, Scene
 from paramlod.surfels.render import FixedCount, FixedSize
 
@@ -207,7 +208,7 @@ def load_scene(path, size=None) -> SceneFile:
             if "mesh" in o:
                 _add_mesh(scene, o, path, m, mat, ck, where, i)
             elif "surfels" in o:
-                _add_surfels(scene, o["surfels"], path, m, mat, ck, where, i)
+                _add_surfels(scene, o["surfels"], path, m, mat, ck, where, i, has_color="color" in o)
             elif "sh_field" in o:
                 _add_sh_field(scene, o["sh_field"], path, m, mat, ck, where, i)
             elif "instances" in o:
@@ -365,15 +366,38 @@ def _add_mesh(scene, o, path, m, mat, ck, where, i):
         scene.add_mesh(file, lod=lod, transform=m, material=mat, variant=variant, aa=aa or None)
 
 
-def _add_surfels(scene, spec, path, m, mat, ck, where, i):
-    """``surfels = { path = "x.surfels", px = 2 }`` (surfel size in pixels) or ``count = N``."""
-    if not isinstance(spec, dict) or "path" not in spec or set(spec) - {"path", "px", "count"} \
+SURFEL_KEYS = {"path", "px", "count", "mesh", "blend"}
+
+
+def _add_surfels(scene, spec, path, m, mat, ck, where, i, has_color=False):
+    """``surfels = { path = "x.surfels", px = 2 }`` (surfel size in pixels) or ``count = N``, and
+    optionally ``mesh = "x.ply"`` (the mesh that takes over past the stored prefix, relative to
+    the scene file) with ``blend = 0.5`` (paramlod.scene.handoff); the object's ``color``, when
+    given, colours that mesh."""
+    if not isinstance(spec, dict) or "path" not in spec or set(spec) - SURFEL_KEYS \
             or ("px" in spec and "count" in spec):
-        ck.fail(f"{where}.surfels", 'must be { path = "x.surfels", px = 2 } or { path = ..., count = N }',
-                "objects", i, "surfels")
+        ck.fail(f"{where}.surfels", 'must be { path = "x.surfels", px = 2 } or { path = ..., count = N }, '
+                'optionally with mesh = "x.ply" and blend = 0.5', "objects", i, "surfels")
+    mesh = spec.get("mesh")
+    if mesh is not None and (not isinstance(mesh, str) or not mesh.strip()):
+        ck.fail(f"{where}.surfels.mesh", f'must be a file name such as "bunny.ply" (relative to the scene file), '
+                f"got {mesh!r}", "objects", i, "surfels")
+    if "blend" in spec:
+        b = spec["blend"]
+        if mesh is None:
+            ck.fail(f"{where}.surfels.blend", 'is the range of the hand-off to a mesh; give mesh = "x.ply" too',
+                    "objects", i, "surfels")
+        if isinstance(b, bool) or not isinstance(b, (int, float)) or not math.isfinite(b) or b <= 0:
+            ck.fail(f"{where}.surfels.blend", f"must be a number > 0 (e.g. 0.5: the mesh has taken over when the "
+                    f"surfel law asks for 1.5 times the set), got {b!r}", "objects", i, "surfels")
     strategy = FixedCount(int(spec["count"])) if "count" in spec else FixedSize(float(spec.get("px", 2.0)))
-    scene.add_surfels((path.parent / spec["path"]).resolve(), transform=m, strategy=strategy,
-                      specular=mat.specular)
+    try:
+        scene.add_surfels((path.parent / spec["path"]).resolve(), transform=m, strategy=strategy,
+                          specular=mat.specular, mesh=None if mesh is None else (path.parent / mesh).resolve(),
+                          blend=float(spec.get("blend", DEFAULT_BLEND)),
+                          material=mat if mesh is not None and has_color else None)
+    except MeshError as exc:   # the hand-off mesh's file: its message names it
+        ck.fail(f"{where}.surfels.mesh", str(exc), "objects", i, "surfels")
 
 
 def _add_sh_field(scene, spec, path, m, mat, ck, where, i):

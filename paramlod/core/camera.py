@@ -1,4 +1,6 @@
-"""Pinhole camera (OpenGL conventions: right-handed, looks down -z in view space)."""
+"""Pinhole camera (OpenGL conventions: right-handed, looks down -z in view space), and the pixel
+and depth facts the surfel prefix law (paramlod.surfels.render) and the surfel -> mesh hand-off
+(paramlod.scene.handoff) share: pixel_world_size, sphere_depth, transform_scale."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -68,3 +70,25 @@ class Camera:
     def with_size(self, size) -> "Camera":
         """The same view at another image size (the aspect ratio follows)."""
         return Camera(self.view.copy(), self.fov_y, (int(size[0]), int(size[1])), self.near, self.far)
+
+
+# --- camera and geometry facts shared by the surfel prefix law and the surfel -> mesh hand-off ---------
+def pixel_world_size(camera, depth: float) -> float:
+    """World size of one pixel (vertically) at view depth ``depth``: 2 w / (P[1,1] H) with w the
+    clip w of a point at that depth (perspective: w = depth; orthographic: w = 1)."""
+    p = camera.projection
+    w = -p[3, 2] * depth + p[3, 3]          # clip w of a point at that depth (z = -depth)
+    return float(2.0 * w / (p[1, 1] * camera.height))
+
+
+def transform_scale(transform) -> float:
+    """The uniform scale of a (similarity) transform: |det of its 3x3 part|^(1/3)."""
+    return float(abs(np.linalg.det(np.asarray(transform, np.float64)[:3, :3])) ** (1.0 / 3.0))
+
+
+def sphere_depth(camera, centre, radius: float, transform) -> float:
+    """View depth of the nearest point of an object-space sphere placed by ``transform`` (its
+    radius scaled by ``transform_scale``), at least the near plane."""
+    m = camera.view @ np.asarray(transform, np.float64)
+    cv = m[:3, :3] @ np.asarray(centre, np.float64) + m[:3, 3]
+    return float(max(-cv[2] - radius * transform_scale(transform), camera.near))

@@ -15,10 +15,13 @@ is negative), its material (MATERIAL), and
 for each instance the largest scale of its model matrix (``scales``: errors and spheres grow by it).
 ``batches`` lists (mesh index, first instance, instance count): instances of one mesh are
 contiguous, so the cut runs once per batch over (its mesh's clusters) x (its instances).
+``handoffs`` lists (instance index, SurfelObject) for the meshes that take over from a surfel
+object (paramlod.scene.handoff); ``weights(camera)`` gives every instance's share of its pixels
+for a frame (1 without a hand-off), which ``DeviceMeshes.set_weights`` sends to the device.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,7 +29,8 @@ import pyopencl as cl
 
 from paramlod.core.layouts import CLUSTER, INSTANCE_F, INSTANCE_U, MATERIAL
 from paramlod.device.context import cl_device
-from paramlod.errors import SceneError
+from paramlod.errors import MeshError, SceneError
+from paramlod.scene.handoff import mesh_weight
 
 SIMILAR, MIRRORED = 1, 2   # MeshInstances.inst_u flags
 
@@ -81,12 +85,15 @@ class MeshInstances:
     materials: np.ndarray   # float32 [n, MATERIAL.length]
     scales: np.ndarray      # float32 [n]: largest singular value of each model's 3x3 part
     batches: list           # (mesh index, first instance, count)
+    handoffs: list = field(default_factory=list)   # (instance, SurfelObject) of hand-off meshes
 
     @classmethod
     def pack(cls, objects, mesh_index) -> "MeshInstances":
         """``objects``: MeshObjects (paramlod.scene.scene); ``mesh_index(mesh) -> int``."""
-        fs, us, ms, ss, batches, at = [], [], [], [], [], 0
+        fs, us, ms, ss, batches, handoffs, at = [], [], [], [], [], [], 0
         for o in objects:
+            if getattr(o, "handoff", None) is not None:
+                handoffs.append((at, o.handoff))
             models = np.broadcast_to(o.transform, (o.count, 4, 4)) if o.transforms is None else o.transform @ o.transforms
             models = np.asarray(models, np.float64)
             lin = models[:, :3, :3]
@@ -115,10 +122,18 @@ class MeshInstances:
         return cls(np.concatenate(fs or [np.zeros((0, INSTANCE_F.length), np.float32)]),
                    np.concatenate(us or [np.zeros((0, INSTANCE_U.length), np.uint32)]),
                    np.concatenate(ms or [np.zeros((0, MATERIAL.length), np.float32)]),
-                   np.concatenate(ss or [np.zeros(0, np.float32)]), batches)
+                   np.concatenate(ss or [np.zeros(0, np.float32)]), batches, handoffs)
 
     def __len__(self) -> int:
         return len(self.inst_f)
+
+    def weights(self, camera) -> np.ndarray:
+        """float32 [n]: each instance's share of its pixels for ``camera`` (the camera of the pass
+        it is drawn in): paramlod.scene.handoff.mesh_weight of its surfel object, 1 without one."""
+        w = np.ones(len(self), np.float32)
+        for i, so in self.handoffs:
+            w[i] = mesh_weight(camera, so)
+        return w
 
 
 class DeviceMeshes:
@@ -137,8 +152,27 @@ class DeviceMeshes:
         self.triangles, self.clusters = up(arrays.triangles), up(arrays.clusters)
         self.inst_f, self.inst_u = up(instances.inst_f), up(instances.inst_u)
         self.materials, self.scales = up(instances.materials), up(instances.scales)
+        # per-instance hand-off weights (all 1 until set_weights; only scenes with hand-offs change them)
+        self._weights_host = np.ones(max(len(instances), 1), np.float32)
+        self.weights = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self._weights_host)
+
+    def set_weights(self, weights) -> None:
+        """Enqueue the upload of the instances' hand-off weights (float [n] in [0, 1]) without
+        waiting: the queue is in order, so this frame's cut and raster read them. Nothing is sent
+        when they equal the last ones sent."""
+        w = np.ascontiguousarray(weights, np.float32).reshape(-1)
+        if len(w) != len(self.instances):
+            raise MeshError(f"hand-off weights: {len(w)} given for {len(self.instances)} mesh instances")
+        if not np.all((w >= 0) & (w <= 1)):
+            raise MeshError("hand-off weights must be in [0, 1] (the mesh's share of its pixels)")
+        if not len(w) or np.array_equal(w, self._weights_host[:len(w)]):
+            return
+        # a new host array each time: the previous one may still be in flight
+        self._weights_host = w.copy()
+        cl.enqueue_copy(cl_device().queue, self.weights, self._weights_host, is_blocking=False)
 
     @property
     def nbytes(self) -> int:
         i = self.instances
-        return self.arrays.nbytes + int(i.inst_f.nbytes + i.inst_u.nbytes + i.materials.nbytes + i.scales.nbytes)
+        return self.arrays.nbytes + int(i.inst_f.nbytes + i.inst_u.nbytes + i.materials.nbytes + i.scales.nbytes
+                                        + self._weights_host.nbytes)

@@ -109,8 +109,9 @@ class ClusterCut:
         """Enqueue the cut of every instance of ``dev`` for ``camera`` at ``threshold_px`` pixels
         (>= 0; 0 draws the original triangles). ``selection``: a Selection, or a cl.Buffer of
         ``capacity`` uint2 pairs with ``counters`` (8 ulong). ``reset``: zero the counters first
-        (False: add to them, e.g. a second view into one selection). Returns the enqueued events
-        (the counters' reset, one kernel per batch); nothing is waited for."""
+        (False: add to them, e.g. a second view into one selection). Instances whose hand-off
+        weight (``dev.weights``, DeviceMeshes.set_weights) is 0 select nothing. Returns the
+        enqueued events (the counters' reset, one kernel per batch); nothing is waited for."""
         if isinstance(selection, Selection):
             buf, capacity, counters = selection.pairs, selection.capacity, selection.counters
         else:
@@ -135,7 +136,7 @@ class ClusterCut:
             if nc == 0 or ni == 0:
                 continue
             k.set_args(dev.clusters, np.uint32(c0), np.uint32(nc), np.uint32(i0), dev.inst_f, dev.inst_u,
-                       dev.scales, cc, mode, buf, np.uint32(capacity), counters)
+                       dev.scales, dev.weights, cc, mode, buf, np.uint32(capacity), counters)
             groups = -(-nc // CUT_LOCAL)
             events.append(launch(q, k.k, (groups * CUT_LOCAL, int(ni)), (CUT_LOCAL, 1)))
         self.events = events

@@ -18,6 +18,8 @@ backface cone (instances flagged SIMILAR only), tested in object space against t
 there by M_i^-1 (facing is invariant under any invertible model, mirrors included):
 culled iff cutoff < 1 and |d| > 0 and dot(d, axis) >= cutoff * |d|, d = apex * E_w - eye_obj,
 with the eye homogeneous (E_w = 1 perspective, 0 orthographic: E is then the backward direction).
+Instances whose hand-off weight is 0 (paramlod.scene.handoff: their surfels draw every pixel) are
+skipped: no pair, no test counted.
 """
 from __future__ import annotations
 
@@ -126,11 +128,13 @@ def _backface_culled(apex, cone, model, normal, cc):
     return (cutoff < 1) & (length > 0) & (dot >= cutoff * length)
 
 
-def select(arrays, instances, camera, threshold_px, cull_frustum=True, cull_backface=True):
+def select(arrays, instances, camera, threshold_px, cull_frustum=True, cull_backface=True, weights=None):
     """The cut of every batch of ``instances`` (paramlod.meshlod.buffers.MeshInstances) over the
-    clusters of ``arrays`` (MeshArrays). Returns (pairs uint32 [n, 2] of (instance, cluster),
-    sorted by instance then cluster; counters {name: int} with the names of COUNTERS)."""
+    clusters of ``arrays`` (MeshArrays); ``weights``: the instances' hand-off weights (None: all 1).
+    Returns (pairs uint32 [n, 2] of (instance, cluster), sorted by instance then cluster;
+    counters {name: int} with the names of COUNTERS)."""
     cc = cut_camera(camera, threshold_px)
+    live_all = np.ones(len(instances.inst_f), bool) if weights is None else np.asarray(weights, _F) > 0
     T = cc[CC_T]
     counts = dict.fromkeys(COUNTERS, 0)
     pairs = []
@@ -145,10 +149,11 @@ def select(arrays, instances, camera, threshold_px, cull_frustum=True, cull_back
         model = np.ascontiguousarray(instances.inst_f[i0:i0 + ni, f_model], _F)
         normal = np.ascontiguousarray(instances.inst_f[i0:i0 + ni, f_normal], _F)
         s = np.asarray(instances.scales[i0:i0 + ni], _F)
-        counts["tests"] += ni * nc
+        live = live_all[i0:i0 + ni]
+        counts["tests"] += int(live.sum()) * nc
         own = projected_error(cl["error"], cl["lod_sphere"], model, s, cc) <= T
         par = np.isinf(cl["parent_error"])[None, :] | (projected_error(cl["parent_error"], cl["parent_sphere"], model, s, cc) > T)
-        draw = own & par
+        draw = own & par & live[:, None]
         if cull_frustum:
             fr = draw & _frustum_culled(cl["sphere"], model, s, cc)
             counts["culled_frustum"] += int(fr.sum())

@@ -16,6 +16,12 @@ reads the command's own (instance, cluster) pair in core GL >= 4.2, with no exte
 and NVIDIA both have ARB_shader_draw_parameters, but a per-draw cluster index would still need a
 second lookup); the instance's records and the cluster's level come from storage buffers.
 Shaders: kernels/meshlod/mesh_{common,vertex,fragment}.glsl.
+
+Hand-off weights (paramlod.scene.handoff) reach the fragment stage per object id (a storage buffer
+of MAX_OBJECT_IDS floats): a hand-off mesh is one instance of its own object, so per object is per
+instance; the fragment stage keeps the pixels whose dither is below the weight, on the target's
+own grid (subsamples with SSAA). The pixels complement the surfels' exactly when the surfels' key
+buffers have that grid too (noAA or MSAA with points supersample 1; 4xSS on both).
 """
 from __future__ import annotations
 
@@ -38,6 +44,7 @@ from paramlod.renderers.gl_targets import GLTargets, effective_aa, targets_for
 from paramlod.renderers.shading import LIGHT
 
 COLOR_BY = {0: "material", 1: "cluster", 2: "level"}
+MAX_OBJECT_IDS = 4096   # object ids are 12 bits (paramlod.scene.scene.MAX_OBJECTS + 1)
 COMMAND_DTYPE = np.dtype([("count", np.uint32), ("instances", np.uint32), ("first", np.uint32),
                           ("base_vertex", np.int32), ("base_instance", np.uint32)])   # DrawElementsIndirectCommand
 
@@ -95,6 +102,8 @@ class MeshDraw:
         self._targets: GLTargets | None = None
         self._picks = _GrowBuffer(self.ctx, 1024)
         self._commands = _GrowBuffer(self.ctx, 1024)
+        self._weights_host = np.ones(MAX_OBJECT_IDS, np.float32)
+        self._weights = self.ctx.buffer(self._weights_host.tobytes())
         self._static: list = []
         self._vaos: dict = {}
 
@@ -148,6 +157,7 @@ class MeshDraw:
         self._release_static()
         for b in (self._picks, self._commands):
             b.buf.release()
+        self._weights.release()
         if self._targets is not None:
             self._targets.release()
             self._targets = None
@@ -165,6 +175,25 @@ class MeshDraw:
         return vao
 
     # --- a frame ----------------------------------------------------------------------------
+    def _object_weights(self, weights) -> np.ndarray:
+        """float32 [MAX_OBJECT_IDS]: the weight of each object id from per-instance ``weights``."""
+        table = np.ones(MAX_OBJECT_IDS, np.float32)
+        if weights is None:
+            return table
+        try:
+            w = np.asarray(weights, np.float32).reshape(-1)
+        except (TypeError, ValueError):
+            raise MeshError("MeshDraw.draw: weights must be numbers in [0, 1], one per uploaded instance") from None
+        if len(w) != len(self.instances) or not np.all((w >= 0) & (w <= 1)):
+            raise MeshError(f"MeshDraw.draw: weights must be {len(self.instances)} numbers in [0, 1] (one per "
+                            f"uploaded instance, MeshInstances.weights), got {len(w)}")
+        ids = self.instances.inst_u[:, INSTANCE_U.offset("object")] & (MAX_OBJECT_IDS - 1)
+        table[ids] = w
+        if not np.array_equal(table[ids], w):
+            raise MeshError("MeshDraw.draw: instances of one object have different weights; the GL draw takes one "
+                            "weight per object (a hand-off mesh is one instance of its own object)")
+        return table
+
     def _check(self, selection, camera, color_by, light, background):
         if self.arrays is None:
             raise MeshError("MeshDraw.draw before MeshDraw.upload: upload the scene's MeshArrays and MeshInstances first")
@@ -204,12 +233,14 @@ class MeshDraw:
         return sel, light, background
 
     def draw(self, selection: np.ndarray, camera: Camera, aa: str | None = None, color_by: int = 0,
-             light=None, background=(0.0, 0.0, 0.0)) -> Frame:
+             light=None, background=(0.0, 0.0, 0.0), weights=None) -> Frame:
         """Draw the (instance, cluster) pairs of ``selection`` (uint32 [n, 2], the cut's output)
         seen by ``camera`` with anti-aliasing ``aa`` (paramlod.renderers.aa.parse_aa; None =
         noAA); ``color_by`` 0/1/2 colours by material, cluster or LOD level; ``light`` is the
-        light record (default paramlod.renderers.shading.LIGHT). Returns a host Frame."""
+        light record (default paramlod.renderers.shading.LIGHT); ``weights``: the instances'
+        hand-off weights (MeshInstances.weights; None: all 1). Returns a host Frame."""
         sel, light, background = self._check(selection, camera, color_by, light, background)
+        table = self._object_weights(weights)
         req, eff, notes = effective_aa(self.ctx, "noAA" if aa is None else aa)
         for msg in notes:
             warnings.warn(msg, RuntimeWarning, stacklevel=2)
@@ -229,12 +260,16 @@ class MeshDraw:
         cmd["base_instance"] = np.arange(n, dtype=np.uint32)
         self._picks.write(sel.tobytes())
         self._commands.write(cmd.tobytes())
+        if not np.array_equal(table, self._weights_host):
+            self._weights.write(table.tobytes())
+            self._weights_host = table
         t2 = time.perf_counter()
 
         set_uniform(prog, "u_view", _mat(camera.view))
         set_uniform(prog, "u_proj", _mat(camera.projection))
         set_uniform(prog, "u_light", light)
-        for binding, b in enumerate((self._inst_f, self._inst_u, self._materials, self._clusters)):
+        set_uniform(prog, "u_rows", int(h * eff.ss))
+        for binding, b in enumerate((self._inst_f, self._inst_u, self._materials, self._clusters, self._weights)):
             b.bind_to_storage_buffer(binding)
         tg.begin()
         ctx.enable(moderngl.DEPTH_TEST)

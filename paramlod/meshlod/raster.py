@@ -90,7 +90,9 @@ class MeshRaster:
         of uint2 (instance, cluster) pairs with room for ``capacity``; ``cut_counters``: the cut's
         ulong counters, [0] the selected count (read on the device, at most ``capacity`` drawn);
         ``light``: the light record (paramlod.renderers.shading.LIGHT) or a buffer holding it;
-        ``color_by``: 0 material, 1 a colour per cluster, 2 per LOD level (or those names)."""
+        ``color_by``: 0 material, 1 a colour per cluster, 2 per LOD level (or those names).
+        Each instance draws the share of its pixels that ``dev.weights`` gives it (the hand-off
+        dither; DeviceMeshes.set_weights, all 1 by default)."""
         color_by = COLOR_BY.get(color_by, color_by)
         if color_by not in (0, 1, 2):
             raise MeshError(f"color_by must be 0 / 'material', 1 / 'cluster' or 2 / 'level', got {color_by!r}")
@@ -111,7 +113,8 @@ class MeshRaster:
         self._host = (cam_host, light_host)
         cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * 8)
         capacity = max(int(capacity), 0)
-        geometry = (dev.vertices, dev.normals, dev.triangles, dev.clusters, dev.inst_f, dev.inst_u, dev.materials)
+        geometry = (dev.vertices, dev.normals, dev.triangles, dev.clusters, dev.inst_f, dev.inst_u, dev.materials,
+                    dev.weights)
         args = (geometry, selection, capacity, cut_counters, cam_buf, light_buf, color_by, keys.color, keys.aux,
                 self.large, self.large_capacity, self.large_pixels)
         # the same buffers and values frame after frame: converting the arguments each time costs

@@ -21,6 +21,7 @@ import numpy as np
 from paramlod.core.color import srgb8_thresholds
 from paramlod.core.layouts import CAMERA, INSTANCE_F, INSTANCE_U, camera_record
 from paramlod.renderers.shading import LIGHT
+from paramlod.scene.handoff import dither
 
 SUBPIXEL_BITS = 8            # snapping grid: 1/256 pixel
 GUARD_PIXELS = 2 ** 20       # guard band around the screen's centre; keeps edge functions < 2^60
@@ -197,16 +198,17 @@ def selected_triangles(arrays, pairs):
     return np.repeat(pairs[:, 0], counts), np.repeat(pairs[:, 1], counts), tri
 
 
-def rasterize(width, height, camera, arrays, instances, pairs, light=LIGHT, color_by: int = 0):
+def rasterize(width, height, camera, arrays, instances, pairs, light=LIGHT, color_by: int = 0, weights=None):
     """(colour keys, aux keys), uint64 [height, width]: the triangles of the selected (instance,
     cluster) ``pairs`` of ``arrays`` (MeshArrays) and ``instances`` (MeshInstances) drawn into
-    cleared keys, as raster_clusters and raster_large draw them."""
-    d = rasterize_detail(width, height, camera, arrays, instances, pairs, light, color_by)
+    cleared keys, as raster_clusters and raster_large draw them; ``weights``: the instances'
+    hand-off weights (None: all 1), an instance of weight w < 1 drawing the pixels of dither < w."""
+    d = rasterize_detail(width, height, camera, arrays, instances, pairs, light, color_by, weights=weights)
     return d["color"], d["aux"]
 
 
 def rasterize_detail(width, height, camera, arrays, instances, pairs, light=LIGHT, color_by: int = 0,
-                     large_pixels: int | None = None) -> dict:
+                     large_pixels: int | None = None, weights=None) -> dict:
     """``rasterize`` with what the kernels count: {"color", "aux", "coverage" (uint32 [h, w]:
     fragments that covered each pixel, depth in range), "counters": {"triangles", "near_clipped",
     "culled", "pixels", "large" when ``large_pixels`` (the kernel's threshold) is given, and
@@ -290,6 +292,8 @@ def rasterize_detail(width, height, camera, arrays, instances, pairs, light=LIGH
 
     mats = materials(instances, arrays.clusters, inst[src], clus[src], color_by)
     oid = instances.inst_u[inst[src], INSTANCE_U.offset("object")].astype(np.uint64) & np.uint64(0xFFF)
+    wts = (np.ones(len(instances.inst_f), np.float32) if weights is None
+           else np.asarray(weights, np.float32).reshape(-1))[inst[src]]          # per sub-triangle
     Vm = V.reshape(4, 4)
     ortho = P[15] != 0
     ck = np.full(H * W, ALL_ONES)
@@ -310,6 +314,8 @@ def rasterize_detail(width, height, camera, arrays, instances, pairs, light=LIGH
         px, py = x * _ONE + _HALF, y * _ONE + _HALF
         E = dx[s] * (py[:, None] - ay[s]) - dy[s] * (px[:, None] - ax[s])   # [n, 3] edge functions
         hit = (E >= bias[s]).all(axis=1)
+        w = wts[s]
+        hit &= (w >= 1) | (dither(x, y) < w)          # rs_fragment's hand-off test
         s, x, y, E = s[hit], x[hit], y[hit], E[hit]
         u = E.astype(np.float32) * iw[s]
         q = (u[:, 0] + u[:, 1]) + u[:, 2]

@@ -10,6 +10,11 @@
 
 The threshold is in pixels of the target drawn into: with supersampling, in subsamples, as the
 parametric objects' LOD is (a cluster's error then stays below one subsample).
+
+Meshes that take over from surfel objects (paramlod.scene.handoff) get their weights each frame,
+for the camera the surfels are splatted with (the keys pass's; for meshlets-gl, the frame's camera
+at settings.points.supersample, the surfels' pass), uploaded without a wait before the cut: the cut
+skips instances of weight 0, the raster and the GL fragment stage keep the pixels of dither < w.
 """
 from __future__ import annotations
 
@@ -80,7 +85,7 @@ class Meshlets:
     def __init__(self, functions=(), record: bool = False):
         self.uploads, self.cut, self.raster = _MeshUploads(), ClusterCut(), MeshRaster()
         self.selection = Selection()
-        self.camera = None
+        self.camera, self.weights = None, None
 
     def prepare(self, scene, camera, settings):
         settings.mesh.validate()
@@ -88,6 +93,8 @@ class Meshlets:
 
     def enqueue(self, target, settings):
         s = settings.mesh
+        # here, not in prepare: a redrawn frame sees the surfel strategies as they are now
+        self.weights = _weights(self.dev, self.camera)
         self._cut = self.cut.enqueue(self.dev, self.camera, s.threshold_px, self.selection,
                                      cull_frustum=s.cull_frustum, cull_backface=s.cull_backface)
         sel = self.selection
@@ -102,7 +109,7 @@ class Meshlets:
         return any([self.selection.grow(), self.raster.grow()])
 
     def stats(self) -> dict:
-        return _mesh_stats(self.selection, self._cut, self.raster.stats(), self.dev)
+        return _mesh_stats(self.selection, self._cut, self.raster.stats(), self.dev, self.weights)
 
 
 class MeshletsGL:
@@ -122,6 +129,8 @@ class MeshletsGL:
 
     def enqueue(self, camera, settings):
         s = settings.mesh
+        ss = settings.points.supersample   # the surfels' keys pass: its camera gives the weights
+        weights = _weights(self.dev, camera if ss == 1 else camera.with_size((camera.width * ss, camera.height * ss)))
         while True:
             events = self.cut.enqueue(self.dev, camera, s.threshold_px, self.selection,
                                       cull_frustum=s.cull_frustum, cull_backface=s.cull_backface)
@@ -130,8 +139,9 @@ class MeshletsGL:
             if not self.selection.grow():
                 break
         pairs = self.selection.read_pairs()
-        frame = self.draw.draw(pairs, camera, settings.tess.aa, COLOR_BY[s.color_by], LIGHT, self.background)
-        stats = _mesh_stats(self.selection, events, {}, self.dev)
+        frame = self.draw.draw(pairs, camera, settings.tess.aa, COLOR_BY[s.color_by], LIGHT, self.background,
+                               weights=weights)
+        stats = _mesh_stats(self.selection, events, {}, self.dev, weights)
         ms = frame.stats["ms"]
         frame.stats.update({k: v for k, v in stats.items() if k != "ms"}, variant="meshlets-gl")
         frame.stats["ms"] = {**ms, "cut": stats["ms"]["cut"], "render": ms.get("draw", 0.0)}
@@ -147,13 +157,25 @@ class MeshletsGL:
         return {}
 
 
-def _mesh_stats(selection, cut_events, raster: dict, dev) -> dict:
+def _weights(dev, camera):
+    """The instances' hand-off weights for ``camera``, sent to the device (no wait); None when the
+    scene has no hand-off (the device's weights stay 1)."""
+    if not dev.instances.handoffs:
+        return None
+    w = dev.instances.weights(camera)
+    dev.set_weights(w)
+    return w
+
+
+def _mesh_stats(selection, cut_events, raster: dict, dev, weights=None) -> dict:
     c = selection.counts()
     ms = sum((e.profile.end - e.profile.start) * 1e-6 for e in cut_events)
     out = {"clusters_drawn": c["selected"], "triangles_drawn": c["triangles"],
            "clusters_culled_frustum": c["culled_frustum"], "clusters_culled_backface": c["culled_backface"],
            "cluster_tests": c["tests"], "mesh_device_bytes": dev.nbytes + selection.nbytes,
            **{(k if k == "atomics" else f"raster_{k}"): v for k, v in raster.items() if k != "ms"}}
+    if weights is not None:   # the hand-off meshes' shares of their pixels, in scene order
+        out["handoff_weights"] = [float(weights[i]) for i, _ in dev.instances.handoffs]
     raster_ms = raster.get("ms", {})
     out["ms"] = {"cut": ms, **raster_ms}
     if raster_ms:

@@ -9,6 +9,10 @@ the parent's surface frame, recomputed for the scene's ``time``.
 Meshes (``add_mesh``, ``add_mesh_instances``) hold a MeshLod that the "mesh" loader of
 ``paramlod.scene.loaders`` makes (registered by ``paramlod.meshlod``, which this room does not
 import); a source added twice to one scene is loaded once, so the device holds it once.
+
+A surfel object may carry its mesh (``add_surfels(..., mesh=...)``): the scene then also holds a
+MeshObject whose ``handoff`` is the SurfelObject (and whose object id is the surfel object's), and
+the mesh takes over where the surfel prefix runs out (paramlod.scene.handoff).
 """
 from __future__ import annotations
 
@@ -20,8 +24,10 @@ import numpy as np
 from paramlod.errors import FunctionError, SceneError
 from paramlod.function.define import ParametricFunction
 from paramlod.function.registry import get_function
+from paramlod.scene.handoff import DEFAULT_BLEND, check_blend
 from paramlod.scene.loaders import load
 from paramlod.scene.meshes import source_key, source_label
+from paramlod.core.color import srgb_to_linear
 from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
 from paramlod.core.transforms import matrix as _as_matrix
 
@@ -74,6 +80,10 @@ class SurfelObject:
     strategy: object           # FixedSize, FixedCount, FrameTimeAdaptive; None: FixedSize(2 px)
     object_id: int
     specular: float = 0.25
+    # the MeshObject that takes over past the stored prefix (None: the surfels draw alone), and the
+    # demand range of the blend (paramlod.scene.handoff.mesh_weight); not in repr/eq (they point at each other)
+    mesh: object = field(default=None, repr=False, compare=False)
+    blend: float = DEFAULT_BLEND
 
 
 @dataclass
@@ -89,6 +99,8 @@ class MeshObject:
     colors: np.ndarray | None = None       # [count, 3] linear RGB, or None
     variant: str | None = None   # "meshlets" (OpenCL raster into the key buffers), "meshlets-gl"; None: the frame's
     aa: str | None = None
+    # the SurfelObject this mesh takes over from (count 1, its transform and object id), or None
+    handoff: object = field(default=None, repr=False, compare=False)
 
 
 def _check_names(variant, aa) -> None:
@@ -278,20 +290,44 @@ class Scene:
         (Versions are unique across scenes, so a renderer never mistakes one scene for another.)"""
         self._version = next(_versions)
 
-    def add_surfels(self, path_or_set, transform=None, strategy=None, specular: float = 0.25) -> SurfelObject:
+    def add_surfels(self, path_or_set, transform=None, strategy=None, specular: float = 0.25, mesh=None,
+                    blend: float = DEFAULT_BLEND, material: Material | None = None) -> SurfelObject:
         """Add a ``.surfels`` file or SurfelSet; ``strategy`` picks the prefix each frame
-        (paramlod.surfels.FixedSize(2) when None, FixedCount, FrameTimeAdaptive)."""
+        (paramlod.surfels.FixedSize(2) when None, FixedCount, FrameTimeAdaptive).
+
+        ``mesh`` (anything ``add_mesh`` takes, drawn with its DAG LOD): the mesh the set was made
+        from, in the same object space; where the strategy asks for more surfels than the set holds
+        (demand = packing / (r^2 N) > 1) the mesh takes over, by a dither over a demand range of
+        ``blend`` (weight = clamp((demand - 1) / blend, 0, 1), paramlod.scene.handoff). The mesh is
+        a MeshObject of the scene (``obj.mesh``) with the set's transform and object id, coloured
+        by ``material`` or the set's mean colour."""
         self._check_room("merge surfel sets into one file")
+        blend = check_blend(blend, "add_surfels")
+        if material is not None and not isinstance(material, Material):
+            raise SceneError(f"add_surfels: material must be a paramlod.Material, got {type(material).__name__}")
+        if mesh is None and material is not None:
+            raise SceneError("add_surfels: material colours the hand-off mesh; give mesh= too (or leave material out)")
         m = np.eye(4) if transform is None else _as_matrix(transform)
-        obj = SurfelObject(load("surfels", path_or_set), m, strategy, self.object_count + 1, specular)
+        obj = SurfelObject(load("surfels", path_or_set), m, strategy, self.object_count + 1, specular, None, blend)
+        if mesh is not None:
+            if abs(np.linalg.det(m[:3, :3])) < 1e-20:
+                raise SceneError("add_surfels: the transform is singular (it flattens the object); "
+                                 "give an invertible one")
+            if material is None:
+                rgb = srgb_to_linear(obj.surfels.colors[:, :3].astype(np.float64) / 255.0).mean(axis=0)
+                material = Material(tuple(float(x) for x in np.clip(rgb, 0, 1)), specular)
+            obj.mesh = MeshObject(self._load_mesh(mesh, "dag"), m, material, obj.object_id, handoff=obj)
+            self.meshes.append(obj.mesh)
         self.surfels.append(obj)
         self.touch()
         return obj
 
     @property
     def object_count(self) -> int:
-        """Objects of every kind (parametric, surfels, meshes): each takes one object id."""
-        return len(self.objects) + len(self.surfels) + len(self.meshes)
+        """Objects of every kind (parametric, surfels, meshes): each takes one object id (a surfel
+        object's hand-off mesh shares the surfel object's, when both are in the scene)."""
+        held = {id(so) for so in self.surfels}
+        return len(self.objects) + len(self.surfels) + sum(1 for m in self.meshes if id(m.handoff) not in held)
 
     @property
     def mesh_instance_count(self) -> int:

@@ -1,10 +1,12 @@
 """numpy twins of kernels/surfels/surfels_sample.cl (bit-identical on small G-buffers: the tests compare
-every pass and whole sampling runs), and of the sampler's round loop."""
+every pass and whole sampling runs), of the sampler's round loop, and of the prefix renderer's
+kernels/surfels/surfels_splat.cl (splat_discs, with the hand-off dither of paramlod.scene.handoff)."""
 from __future__ import annotations
 
 import numpy as np
 
 from paramlod.core.color import linear_to_srgb8_f64
+from paramlod.scene.handoff import dither
 from paramlod.surfels.build.schedule import (ALL_ONES, HI, f32_bits, handover_r2, key_pixel, key_r2, level_strides,
                                              remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
 
@@ -204,10 +206,11 @@ def shade(n_view, ev, mat, light):
     return (c[..., 0] << np.uint64(24)) | (c[..., 1] << np.uint64(16)) | (c[..., 2] << np.uint64(8)) | np.uint64(255), n
 
 
-def splat_discs(pos4, nrm4, albedo4, n, radius, xf, cam, inv_proj, light, specular, object_id):
+def splat_discs(pos4, nrm4, albedo4, n, radius, xf, cam, inv_proj, light, specular, object_id, mesh_weight=0.0):
     """(colour keys, aux keys), uint64 (H, W): the discs of the first n surfels, atom_min'd into
-    cleared buffers. Coverage and depth bits follow the kernel's float32 operations exactly;
-    colour and normal bits are float64 (they may differ by one unit)."""
+    cleared buffers, less the pixels whose hand-off dither is below ``mesh_weight`` (the mesh's).
+    Coverage and depth bits follow the kernel's float32 operations exactly; colour and normal
+    bits are float64 (they may differ by one unit)."""
     W, H = int(cam[32]), int(cam[33])
     near, far = _f(cam[34]), _f(cam[35])
     V = np.asarray(cam[0:16], np.float64)
@@ -220,6 +223,8 @@ def splat_discs(pos4, nrm4, albedo4, n, radius, xf, cam, inv_proj, light, specul
     d = _unproject(inv_proj, nx, ny, _f(1)) - o
     r = _f(radius)
     r2 = r * r
+    w = _f(mesh_weight)
+    mine = ~(dither(xs, ys) < w) if w > 0 else np.ones(H * W, bool)
     with np.errstate(all="ignore"):
         for i in range(n):
             e = _rows_point(xf[:12], pos4[i, :3].astype(np.float32))
@@ -229,7 +234,7 @@ def splat_discs(pos4, nrm4, albedo4, n, radius, xf, cam, inv_proj, light, specul
             h = o + t[:, None] * d
             dh = h - e
             depth = -h[:, 2]
-            hit = (den != 0) & (_dot(dh, dh) <= r2) & (depth >= near) & (depth <= far)
+            hit = mine & (den != 0) & (_dot(dh, dh) <= r2) & (depth >= near) & (depth <= far)
             if -e[2] - r > far or -e[2] + r < near:
                 hit[:] = False
             q = np.flatnonzero(hit)
