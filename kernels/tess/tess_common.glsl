@@ -23,18 +23,7 @@ uniform mat4 u_view;        // world -> view
 uniform mat4 u_proj;        // view -> clip
 uniform vec2 u_screen;      // output width, height in pixels (the LOD stage's pixels)
 
-// rows of 4 floats starting at pl_inst_f[base]: the 3x4 affine part applied to a point / direction
-vec3 pl_rows_point(uint base, vec3 p) {
-    return vec3(pl_inst_f[base + 0u] * p.x + pl_inst_f[base + 1u] * p.y + pl_inst_f[base + 2u] * p.z + pl_inst_f[base + 3u],
-                pl_inst_f[base + 4u] * p.x + pl_inst_f[base + 5u] * p.y + pl_inst_f[base + 6u] * p.z + pl_inst_f[base + 7u],
-                pl_inst_f[base + 8u] * p.x + pl_inst_f[base + 9u] * p.y + pl_inst_f[base + 10u] * p.z + pl_inst_f[base + 11u]);
-}
-
-vec3 pl_rows_dir(uint base, vec3 d) {
-    return vec3(pl_inst_f[base + 0u] * d.x + pl_inst_f[base + 1u] * d.y + pl_inst_f[base + 2u] * d.z,
-                pl_inst_f[base + 4u] * d.x + pl_inst_f[base + 5u] * d.y + pl_inst_f[base + 6u] * d.z,
-                pl_inst_f[base + 8u] * d.x + pl_inst_f[base + 9u] * d.y + pl_inst_f[base + 10u] * d.z);
-}
+#include "common/rows.glsl"
 
 vec4 pl_domain(uint inst) {
     uint b = inst * PL_INST_F + PL_INST_DOMAIN;

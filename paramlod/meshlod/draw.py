@@ -40,7 +40,7 @@ from paramlod.device.context import gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import DeviceError, MeshError
 from paramlod.meshlod.buffers import MeshArrays, MeshInstances
-from paramlod.renderers.gl_targets import GLTargets, effective_aa, targets_for
+from paramlod.renderers.gl_targets import GLTargets, GrowBuffer, effective_aa, gl_matrix, targets_for
 from paramlod.renderers.shading import LIGHT
 
 COLOR_BY = {0: "material", 1: "cluster", 2: "level"}
@@ -72,26 +72,6 @@ def _program(ctx, color_by: int):
     return prog
 
 
-def _mat(m) -> np.ndarray:
-    """A row-major 4x4 matrix as GLSL's column-major mat4 bytes."""
-    return np.ascontiguousarray(np.asarray(m, np.float64).T, np.float32)
-
-
-class _GrowBuffer:
-    """A GL buffer replaced by a bigger one (a power of two) when data does not fit."""
-
-    def __init__(self, ctx, nbytes: int = 16):
-        self.ctx, self.buf, self.generation = ctx, ctx.buffer(reserve=max(16, nbytes)), 0
-
-    def write(self, data: bytes):
-        if len(data) > self.buf.size:
-            self.buf.release()
-            self.buf = self.ctx.buffer(reserve=1 << int(math.ceil(math.log2(len(data)))))
-            self.generation += 1
-        if data:
-            self.buf.write(data)
-
-
 class MeshDraw:
     """GL buffers of one scene's meshes and instances, and the per-frame draw of a selection."""
 
@@ -100,8 +80,8 @@ class MeshDraw:
         self.arrays: MeshArrays | None = None
         self.instances: MeshInstances | None = None
         self._targets: GLTargets | None = None
-        self._picks = _GrowBuffer(self.ctx, 1024)
-        self._commands = _GrowBuffer(self.ctx, 1024)
+        self._picks = GrowBuffer(self.ctx, 1024)
+        self._commands = GrowBuffer(self.ctx, 1024)
         self._weights_host = np.ones(MAX_OBJECT_IDS, np.float32)
         self._weights = self.ctx.buffer(self._weights_host.tobytes())
         self._static: list = []
@@ -265,8 +245,8 @@ class MeshDraw:
             self._weights_host = table
         t2 = time.perf_counter()
 
-        set_uniform(prog, "u_view", _mat(camera.view))
-        set_uniform(prog, "u_proj", _mat(camera.projection))
+        set_uniform(prog, "u_view", gl_matrix(camera.view))
+        set_uniform(prog, "u_proj", gl_matrix(camera.projection))
         set_uniform(prog, "u_light", light)
         set_uniform(prog, "u_rows", int(h * eff.ss))
         for binding, b in enumerate((self._inst_f, self._inst_u, self._materials, self._clusters, self._weights)):

@@ -16,6 +16,8 @@ the nearest covered sample of the block, +inf / 0 / 0 where none is.
 """
 from __future__ import annotations
 
+import math
+
 import moderngl
 import numpy as np
 
@@ -183,3 +185,24 @@ def targets_for(current: GLTargets | None, ctx, size, ss: int, samples: int, wha
     if current is not None:
         current.release()
     return GLTargets(ctx, tuple(size), ss, samples, what)
+
+
+def gl_matrix(m) -> np.ndarray:
+    """A row-major 4x4 matrix as GLSL's column-major mat4 (float32)."""
+    return np.ascontiguousarray(np.asarray(m, np.float64).T, np.float32)
+
+
+class GrowBuffer:
+    """A GL buffer replaced by a bigger one (a power of two) when data does not fit
+    (``generation`` counts the replacements, so vertex arrays that bind it know to rebuild)."""
+
+    def __init__(self, ctx, nbytes: int = 16):
+        self.ctx, self.buf, self.generation = ctx, ctx.buffer(reserve=max(16, nbytes)), 0
+
+    def write(self, data: bytes):
+        if len(data) > self.buf.size:
+            self.buf.release()
+            self.buf = self.ctx.buffer(reserve=1 << int(math.ceil(math.log2(len(data)))))
+            self.generation += 1
+        if data:
+            self.buf.write(data)

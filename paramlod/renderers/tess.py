@@ -39,7 +39,8 @@ from paramlod.lod.patches import RENDER_DTYPE
 from paramlod.lod.stage import LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import AAMode, lod_divisor, parse_aa  # noqa: F401  (AAMode, lod_divisor re-exported)
-from paramlod.renderers.gl_targets import GLTargets, effective_aa, max_samples, resolve_program, targets_for
+from paramlod.renderers.gl_targets import (GLTargets, GrowBuffer, effective_aa, gl_matrix, max_samples, resolve_program,
+                                           targets_for)
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.shading import LIGHT
 from paramlod.scene.scene import Scene
@@ -139,26 +140,6 @@ def build_programs(ctx, functions, spacing: str):
     return progs
 
 
-def _mat(m) -> np.ndarray:
-    """A row-major 4x4 matrix as GLSL's column-major mat4 bytes."""
-    return np.ascontiguousarray(np.asarray(m, np.float64).T, np.float32)
-
-
-class _GrowBuffer:
-    """A GL buffer that is replaced by a bigger one when data does not fit (``generation`` counts)."""
-
-    def __init__(self, ctx, nbytes: int):
-        self.ctx, self.buf, self.generation = ctx, ctx.buffer(reserve=max(16, nbytes)), 0
-
-    def write(self, data: bytes):
-        if len(data) > self.buf.size:
-            self.buf.release()
-            self.buf = self.ctx.buffer(reserve=1 << int(math.ceil(math.log2(len(data)))))
-            self.generation += 1
-        if data:
-            self.buf.write(data)
-
-
 # --- the renderer -------------------------------------------------------------------------------
 class TessRenderer:
     """Compiled programs and reusable GL buffers and targets for one set of functions."""
@@ -169,11 +150,11 @@ class TessRenderer:
         glsl_dispatch_source(self.functions, position=True, surface=False)  # fails early, naming the function
         self._targets: GLTargets | None = None
         c = self.ctx
-        self._patches = _GrowBuffer(c, 64 * 1024)
-        self._params = _GrowBuffer(c, 1024)
-        self._inst_f = _GrowBuffer(c, 1024)
-        self._inst_u = _GrowBuffer(c, 1024)
-        self._materials = _GrowBuffer(c, 1024)
+        self._patches = GrowBuffer(c, 64 * 1024)
+        self._params = GrowBuffer(c, 1024)
+        self._inst_f = GrowBuffer(c, 1024)
+        self._inst_u = GrowBuffer(c, 1024)
+        self._materials = GrowBuffer(c, 1024)
         self._counters = c.buffer(reserve=16)
         self._vaos: dict = {}
 
@@ -266,8 +247,8 @@ class TessRenderer:
         self._counters.write(np.zeros(4, np.uint32).tobytes())
         t2 = time.perf_counter()
 
-        set_uniform(prog, "u_view", _mat(camera.view))
-        set_uniform(prog, "u_proj", _mat(camera.projection))
+        set_uniform(prog, "u_view", gl_matrix(camera.view))
+        set_uniform(prog, "u_proj", gl_matrix(camera.projection))
         set_uniform(prog, "u_screen", (float(w), float(h)))
         set_uniform(prog, "u_threshold", (tu, tv))
         if settings.mode == "fixed":
