@@ -8,6 +8,7 @@
 
 #include "common/dialect.cl"
 #include "common/shading.cl"
+#include "common/hash.cl"
 
 // Linear [0, 1] to the sRGB 8-bit code that rounding the exact sRGB curve would give: a binary
 // search of the prelude's SRGB8_THRESHOLDS (paramlod.core.color.srgb8_thresholds).
@@ -57,23 +58,4 @@ inline uint write_point(__global ulong* color_buf, __global ulong* aux_buf, uint
     if (key < color_buf[pix]) { atom_min(&color_buf[pix], key); issued = 1u; }
     if (aux < aux_buf[pix]) { atom_min(&aux_buf[pix], aux); }
     return issued;
-}
-
-// Screen-door dither of the surfel -> mesh hand-off (paramlod/scene/handoff.py, docs/surfels.md):
-// a value in [0, 1) per pixel or subsample (column x, row y from the top), the top 24 bits of an
-// integer hash (xor-shift-multiply, two rounds), exact in float32. The surfel splat skips pixels
-// whose dither is below the object's mesh weight, the mesh raster those at or above it, so at any
-// weight each pixel comes from exactly one of them. numpy twin: paramlod.scene.handoff.dither;
-// GLSL copy: kernels/meshlod/mesh_fragment.glsl.
-inline uint pl_dither_hash(uint x) {
-    x = x ^ (x >> 16);
-    x = x * 0x7feb352du;
-    x = x ^ (x >> 15);
-    x = x * 0x846ca68bu;
-    x = x ^ (x >> 16);
-    return x;
-}
-
-inline float pl_dither(uint x, uint y) {
-    return (float)(pl_dither_hash(pl_dither_hash(y) + x) >> 8) * (1.0f / 16777216.0f);
 }

@@ -8,22 +8,13 @@
 #ifndef PL_DEBUG_COLOR
 #define PL_DEBUG_COLOR
 
+#include "common/hash.cl"
+
 #ifdef __OPENCL_VERSION__
 #define PL_DEBUG_FN inline
 #else
 #define PL_DEBUG_FN
 #endif
-
-// An integer hash with good avalanche (xor-shift-multiply, two rounds), so that neighbouring
-// cluster indices get unrelated colours.
-PL_DEBUG_FN uint pl_hash32(uint x) {
-    x = x ^ (x >> 16);
-    x = x * 0x7feb352du;
-    x = x ^ (x >> 15);
-    x = x * 0x846ca68bu;
-    x = x ^ (x >> 16);
-    return x;
-}
 
 // A bright colour per global cluster index: hue, saturation and value from three bytes of the
 // hash (value >= 0.55 so that shading keeps the colour readable).

@@ -8,9 +8,9 @@
 // shaded like a material of that colour.
 // Hand-off (paramlod/scene/handoff.py): an object of weight w < 1 (pl_object_weight, indexed by
 // object id: a hand-off mesh is one instance of its own object) keeps only the fragments whose
-// dither is below w, the surfels drawing the others. pl_dither is kernels/common/keys.cl's, copied
-// (keys.cl is OpenCL only), on the target's grid with rows counted from the top as the key
-// buffers count them; numpy twin: paramlod.scene.handoff.dither.
+// dither is below w, the surfels drawing the others. pl_dither is kernels/common/hash.cl's, on the
+// target's grid with rows counted from the top as the key buffers count them; numpy twin:
+// paramlod.core.hashing.dither.
 centroid in vec3 ms_view;
 centroid in vec3 ms_normal;
 flat in vec4 ms_material;
@@ -28,21 +28,9 @@ uniform int u_rows;     // the target's height in pixels (subsamples with SSAA),
 
 layout(std430, binding = 4) readonly buffer PlObjectWeights { float pl_object_weight[]; };   // [4096]
 
-uint pl_dither_hash(uint x) {
-    x = x ^ (x >> 16);
-    x = x * 0x7feb352du;
-    x = x ^ (x >> 15);
-    x = x * 0x846ca68bu;
-    x = x ^ (x >> 16);
-    return x;
-}
-
-float pl_dither(uint x, uint y) {
-    return float(pl_dither_hash(pl_dither_hash(y) + x) >> 8) * (1.0 / 16777216.0);
-}
-
 #include "common/dialect.glsl"
 #include "common/shading.cl"
+#include "common/hash.cl"
 
 void main() {
     float weight = pl_object_weight[ms_object & 0xFFFu];

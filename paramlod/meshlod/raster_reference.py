@@ -21,7 +21,7 @@ import numpy as np
 from paramlod.core.color import srgb8_thresholds
 from paramlod.core.layouts import CAMERA, INSTANCE_F, INSTANCE_U, camera_record
 from paramlod.renderers.shading import LIGHT
-from paramlod.scene.handoff import dither
+from paramlod.core.hashing import dither, hash32
 
 SUBPIXEL_BITS = 8            # snapping grid: 1/256 pixel
 GUARD_PIXELS = 2 ** 20       # guard band around the screen's centre; keeps edge functions < 2^60
@@ -139,20 +139,9 @@ def shade(n_view, ev, mat, light):
 
 
 # --- debug colours (kernels/meshlod/debug_color.cl) ------------------------------------------------
-def _hash32(x):
-    x = np.asarray(x, np.uint32)
-    with np.errstate(over="ignore"):
-        x = x ^ (x >> np.uint32(16))
-        x = x * np.uint32(0x7FEB352D)
-        x = x ^ (x >> np.uint32(15))
-        x = x * np.uint32(0x846CA68B)
-        x = x ^ (x >> np.uint32(16))
-    return x
-
-
 def cluster_color(cluster) -> np.ndarray:
     """pl_cluster_color: float32 [..., 3] linear RGB of global cluster indices."""
-    h = _hash32(cluster)
+    h = hash32(cluster)
     hue = (h & np.uint32(255)).astype(np.float32) / _f(256)
     sat = _f(0.55) + _f(0.45) * (((h >> np.uint32(8)) & np.uint32(255)).astype(np.float32) / _f(255))
     val = _f(0.55) + _f(0.45) * (((h >> np.uint32(16)) & np.uint32(255)).astype(np.float32) / _f(255))

@@ -12,9 +12,9 @@ at or above it. Each computes ``mesh_weight`` for the camera of its own pass.
                                    (r: the prefix radius of the strategy's size, as choose_prefix)
   weight = clamp((demand - 1) / blend, 0, 1)      (FixedCount, no size in pixels: 0)
 
-``dither`` is the numpy twin of kernels/common/keys.cl ``pl_dither`` (and of its GLSL copy in
-kernels/meshlod/mesh_fragment.glsl), used by both kernel twins (surfels/build/reference.py
-splat_discs, paramlod/meshlod/raster_reference.py).
+The dither is kernels/common/hash.cl ``pl_dither`` (OpenCL and GLSL); its numpy twin,
+paramlod.core.hashing.dither, serves both kernel twins (surfels/build/reference.py splat_discs,
+paramlod/meshlod/raster_reference.py).
 """
 from __future__ import annotations
 
@@ -72,23 +72,3 @@ def mesh_weight(camera, surfel_object) -> float:
         return 0.0
     d = demand(camera, surfel_object)
     return float(min(max((d - 1.0) / surfel_object.blend, 0.0), 1.0))
-
-
-# --- numpy twin of kernels/common/keys.cl pl_dither -------------------------------------------------------
-def _hash(x: np.ndarray) -> np.ndarray:
-    x = np.asarray(x, np.uint32)
-    with np.errstate(over="ignore"):
-        x = x ^ (x >> np.uint32(16))
-        x = x * np.uint32(0x7FEB352D)
-        x = x ^ (x >> np.uint32(15))
-        x = x * np.uint32(0x846CA68B)
-        x = x ^ (x >> np.uint32(16))
-    return x
-
-
-def dither(x, y) -> np.ndarray:
-    """float32 in [0, 1) of pixel (or subsample) column ``x`` and row ``y`` (top row 0): the top 24
-    bits of hash(hash(y) + x), exact in float32."""
-    with np.errstate(over="ignore"):
-        h = _hash(_hash(np.asarray(y, np.uint32)) + np.asarray(x, np.uint32))
-    return (h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0)

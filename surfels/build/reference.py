@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod.core.color import linear_to_srgb8_f64
-from paramlod.scene.handoff import dither
+from paramlod.core.hashing import dither
 from paramlod.surfels.build.schedule import (ALL_ONES, HI, f32_bits, handover_r2, key_pixel, key_r2, level_strides,
                                              remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
 

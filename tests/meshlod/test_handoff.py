@@ -29,7 +29,8 @@ from paramlod.meshlod.raster import MeshRaster
 from paramlod.pipeline.driver import render_passes
 from paramlod.renderers.shading import LIGHT
 from paramlod.renderers.targets import KeyBuffer
-from paramlod.scene.handoff import demand, dither, mesh_weight
+from paramlod.core.hashing import dither
+from paramlod.scene.handoff import demand, mesh_weight
 from paramlod.scene.scene import Material, MeshObject, SurfelObject
 from paramlod.surfels import FixedCount, FixedSize, FrameTimeAdaptive, SurfelSet
 from paramlod.surfels.build import reference as surfel_ref
