@@ -1,4 +1,4 @@
-"""Command line: ``paramlod render | info | functions | bench | gallery | surfels | mesh | glyphs``."""
+"""Command line: ``paramlod render | info | functions | bench | bench-scale | gallery | surfels | mesh | glyphs``."""
 from __future__ import annotations
 
 import argparse
@@ -6,43 +6,54 @@ import json
 import sys
 from pathlib import Path
 
-from paramlod.app import gallery, glyphs, mesh_cmd, surfels_cmd
-from paramlod.app.args import add_output, add_size, add_stats, run_reporting_errors
+from paramlod.app import dist, gallery, glyphs, mesh_cmd, surfels_cmd
+from paramlod.app.args import add_size, add_stats, run_reporting_errors
 from paramlod.app.bench import run as bench
-from paramlod.app.scenefile import load_scene
 from paramlod.device import context as device_context
 from paramlod.errors import ParamlodError
 from paramlod.function import registry
 from paramlod.pipeline.driver import render
 
 
+def _render_job_requested(args) -> bool:
+    return (len(args.scene) > 1 or args.frames is not None or args.turntable is not None or bool(args.camera_path)
+            or args.video is not None or args.fps is not None or dist.job_requested(args))
+
+
 def cmd_render(args) -> int:
-    sf = load_scene(args.scene, size=args.size)
+    if _render_job_requested(args):
+        return cmd_render_job(args)
+    sf, variant = dist.prepare_scene(args.scene[0], args.size, args.variant, args.aa)
     camera = sf.camera
-    if args.aa:
-        variant = args.variant or (None if sf.object_variants else sf.variant)
-        sf.settings.apply_aa(args.aa, points_only=variant == "points")
-    if args.variant:   # --variant draws every object with it (meshes with the mesh variant that goes with it)
-        for obj in [*sf.scene.objects, *sf.scene.meshes]:
-            obj.variant = obj.aa = None
-        sf.scene.touch()
-    variant = args.variant or sf.variant
     frame = render(sf.scene, camera, variant=variant, settings=sf.settings)
-    if sf.object_variants and not args.variant:
-        variant = "mixed (" + ", ".join(sorted(set(sf.object_variants))) + ")"
-    outs = args.output or [str(Path("out") / (Path(args.scene).stem + ".png"))]
+    label = dist.variant_label(sf, args.variant)
+    outs = args.output or [str(Path("out") / (Path(args.scene[0]).stem + ".png"))]
     for out in outs:
         frame.save(out)
     s = frame.stats
     ms = s["ms"]
     device = s.get("device") or s.get("lod_device")
-    parts = [f"{camera.width}x{camera.height} {variant}" + (f" on {device}" if device else "")]
+    parts = [f"{camera.width}x{camera.height} {label}" + (f" on {device}" if device else "")]
     if "render_patches" in s:
         parts.append(f"{s['render_patches']} render patches")
     parts.append(f"{s['pixels_written']} pixels, {ms['total']:.1f} ms")
     print(f"{', '.join(outs)}: " + ", ".join(parts))
     if args.stats:
         Path(args.stats).write_text(json.dumps(s, indent=2))
+    return 0
+
+
+def cmd_render_job(args) -> int:
+    """Frames of one or more scenes (--frames, --turntable, --camera-path), serial or on Dask."""
+    if args.stats:
+        raise ParamlodError("--stats is for one frame; a job of frames reports its throughput instead")
+    job = dist.render_job(args.scene, args.output, frames=args.frames, fps=args.fps, turntable=args.turntable,
+                          camera_path=args.camera_path, size=args.size, variant=args.variant, aa=args.aa,
+                          video=args.video, setup=dist.WorkerSetup.from_args(args))
+    report = dist.run_job(job, dist.Where.from_args(args), progress=not args.quiet, overwrite=args.overwrite)
+    print(report.summary())
+    for product in job.products:
+        print(f"video: {product}")
     return 0
 
 
@@ -79,15 +90,30 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a folder of plugin .py files (repeatable; or PARAMLOD_FUNCTIONS_PATH)")
     sub = p.add_subparsers(dest="command", required=True)
 
-    r = sub.add_parser("render", help="render a TOML scene to PNG and/or EXR")
-    r.add_argument("scene", help="scene file (.toml)")
-    add_output(r, required=False, default_help="default out/<scene>.png")
+    r = sub.add_parser("render", help="render a TOML scene to PNG and/or EXR (one frame, or a job of frames)")
+    r.add_argument("scene", nargs="+", help="scene file(s) (.toml); several make one job (use {scene} in -o)")
+    r.add_argument("-o", "--output", action="append", metavar="FILE",
+                   help="output .png or .exr (repeatable); for several frames a pattern with {frame} "
+                        "(also {time}, {angle}, {scene}), e.g. out/frame_{frame:04d}.png; default "
+                        "out/<scene>.png, or out/<scene>_{frame:04d}.png for a job")
     add_size(r, what="override the camera size")
     r.add_argument("--variant", help="override the render variant: points, points-ssaa or tess (meshes follow: "
                    "meshlets, or meshlets-gl with tess), or meshlets / meshlets-gl for the meshes")
     r.add_argument("--aa", help="anti-aliasing: noAA, msaa2/4/8, ssaa2x2/3x3/4x4, or a combination such "
                                 "as 4xSS+8xMS (tess); the points variant takes the supersampling only")
     add_stats(r)
+    a = r.add_argument_group("frames (a job: each frame is a task, see docs/scale-out.md)")
+    a.add_argument("--frames", type=dist.parse_range, metavar="A:B",
+                   help="frames A to B-1 (A:B:STEP, one number, or 'all' of the [animation] table); frame i is "
+                        "at time t0 + i*dt (dt from [animation], or 1/fps)")
+    a.add_argument("--fps", type=float, help="frames per second: frames 1/fps apart in scene time, and the "
+                                             "video's rate (default: the [animation] table's)")
+    a.add_argument("--turntable", type=int, metavar="N", help="N frames around the scene's up axis, at fixed time")
+    a.add_argument("--camera-path", nargs="?", const=True, metavar="FILE",
+                   help="the camera follows the [camera_path] keyframes of the scene file (or of FILE)")
+    a.add_argument("--video", metavar="FILE", help="assemble the PNG frames into FILE (.gif or .mp4) at the end")
+    a.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    dist.add_job_options(r)
     r.set_defaults(func=cmd_render)
 
     i = sub.add_parser("info", help="print the OpenCL and OpenGL devices and their capabilities")
@@ -99,6 +125,11 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="measure LOD and render times")
     bench.add_arguments(b)
     b.set_defaults(func=bench.run_bench)
+
+    bs = sub.add_parser("bench-scale", help="frames per second of an animation against the Dask worker count "
+                                            "(docs/scale-out.md)")
+    dist.add_bench_arguments(bs)
+    bs.set_defaults(func=dist.run_bench_scaling)
 
     g = sub.add_parser("gallery", help="render every scene of the gallery to PNG, EXR (and GIF)")
     gallery.add_arguments(g)

@@ -1,5 +1,7 @@
-"""``paramlod mesh build | info`` (paramlod/app/cli.py calls add_subparser): build a mesh's cluster
-DAG into a ``.meshlod`` file (or the cache) and print what a mesh's level of detail holds."""
+"""``paramlod mesh build | info`` (paramlod/app/cli.py calls add_subparser): build a mesh's level of
+detail (the cluster DAG, the original triangles only, or a discrete chain of whole-mesh levels:
+``--lod dag|full|chain``, ``--full`` and ``--chain`` for short) into a ``.meshlod`` file (or the
+cache) and print what it holds."""
 from __future__ import annotations
 
 import argparse
@@ -7,9 +9,10 @@ import json
 import sys
 from pathlib import Path
 
+from paramlod.app import dist
 from paramlod.app.args import run_reporting_errors
 from paramlod.errors import MeshError
-from paramlod.meshlod.format import SUFFIX, load_meshlod, mesh_info, save_meshlod
+from paramlod.meshlod.format import LODS, SUFFIX, load_meshlod, mesh_info, save_meshlod
 from paramlod.meshlod.source import load_mesh
 
 
@@ -26,6 +29,14 @@ def _size(n: int) -> str:
         if n < 1024 or unit == "GiB":
             return f"{n} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
         n /= 1024
+
+
+def _lod(args) -> str:
+    """The lod the options ask for; --full and --chain are --lod full and --lod chain."""
+    asked = {x for x in (args.lod, "full" if args.full else None, "chain" if args.chain else None) if x}
+    if len(asked) > 1:
+        raise MeshError(f"give one level-of-detail kind: --lod {' / --lod '.join(sorted(asked))} contradict each other")
+    return asked.pop() if asked else "dag"
 
 
 def format_info(info: dict, file_bytes: int | None = None) -> str:
@@ -50,13 +61,19 @@ def format_info(info: dict, file_bytes: int | None = None) -> str:
 
 
 def cmd_build(args) -> int:
-    source = Path(args.mesh)
+    if len(args.mesh) > 1 or dist.job_requested(args):
+        job = dist.mesh_build_job(args.mesh, out=args.output or "{stem}" + SUFFIX, lod=_lod(args),
+                                  cache=not args.no_cache, setup=dist.WorkerSetup.from_args(args))
+        print(dist.run_job(job, dist.Where.from_args(args), progress=not args.quiet,
+                           overwrite=args.overwrite).summary())
+        return 0
+    source = Path(args.mesh[0])
     if source.name.lower().endswith(SUFFIX):
         raise MeshError(f"{source} is already a {SUFFIX} file; give the mesh file it was built from")
     out = Path(args.output) if args.output else None
     if out is not None:
         _check_output(out, source)   # fail before the build, not after it
-    lod = load_mesh(source, lod="full" if args.full else "dag", cache=not args.no_cache,
+    lod = load_mesh(source, lod=_lod(args), cache=not args.no_cache,
                     progress=False if args.quiet else True)
     file_bytes = None
     if out is not None:
@@ -78,7 +95,7 @@ def cmd_info(args) -> int:
         lod = load_meshlod(path)
         file_bytes = path.stat().st_size
     else:
-        lod = load_mesh(path, lod="full" if args.full else "dag", progress=None)
+        lod = load_mesh(path, lod=_lod(args), progress=None)
         file_bytes = None
     info = mesh_info(lod)
     if args.json:
@@ -88,24 +105,37 @@ def cmd_info(args) -> int:
     return 0
 
 
+def _lod_options(p, prefix: str) -> None:
+    p.add_argument("--lod", choices=LODS, default=None,
+                   help=f"{prefix}dag (cluster DAG, the default), full (only the original triangles) or chain "
+                        "(whole-mesh levels halving down to about 100 triangles)")
+    p.add_argument("--full", action="store_true", help=f"{prefix}the same as --lod full")
+    p.add_argument("--chain", action="store_true", help=f"{prefix}the same as --lod chain")
+
+
 def add_subparser(subparsers) -> argparse.ArgumentParser:
     """Register ``mesh`` with its commands on an argparse subparsers object."""
-    p = subparsers.add_parser("mesh", help="mesh level of detail: build a cluster DAG, inspect it",
-                              description="Mesh level of detail: the cluster DAG (.meshlod files and the build cache).")
+    p = subparsers.add_parser("mesh", help="mesh level of detail: build a cluster DAG or a LOD chain, inspect it",
+                              description="Mesh level of detail: the cluster DAG or a discrete LOD chain "
+                                          "(.meshlod files and the build cache).")
     sub = p.add_subparsers(dest="mesh_command", required=True, metavar="{build,info}")
 
-    b = sub.add_parser("build", help="build a mesh's cluster DAG (into the cache, or a .meshlod file with -o)")
-    b.add_argument("mesh", help="mesh file (.obj .ply .stl .off .glb .gltf .surf.gii)")
-    b.add_argument("-o", "--output", help=f"write the result to this {SUFFIX} file")
-    b.add_argument("--full", action="store_true", help="only the original triangles (no DAG): lod = full")
+    b = sub.add_parser("build", help="build a mesh's cluster DAG or LOD chain (into the cache, or a .meshlod file "
+                                     "with -o)")
+    b.add_argument("mesh", nargs="+", help="mesh file(s) (.obj .ply .stl .off .glb .gltf .surf.gii); several "
+                                          "files (or --workers/--gpus/--scheduler) run as a job (docs/scale-out.md)")
+    b.add_argument("-o", "--output", help=f"write the result to this {SUFFIX} file (several files: a pattern "
+                                          "with {stem} or {name}, default {stem}.meshlod beside each mesh)")
+    _lod_options(b, "")
     b.add_argument("--no-cache", action="store_true", help="build again even if the cache holds the build")
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     b.add_argument("--json", action="store_true", help="print JSON")
+    dist.add_job_options(b)
     b.set_defaults(func=cmd_build)
 
     i = sub.add_parser("info", help=f"print the levels of a {SUFFIX} file or of a mesh file's (cached) build")
     i.add_argument("mesh", help=f"{SUFFIX} file or mesh file")
-    i.add_argument("--full", action="store_true", help="for a mesh file: the lod = full build")
+    _lod_options(i, "for a mesh file: ")
     i.add_argument("--json", action="store_true", help="print JSON")
     i.set_defaults(func=cmd_info)
     return p

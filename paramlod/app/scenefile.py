@@ -27,14 +27,14 @@ from paramlod.scene.handoff import DEFAULT_BLEND
 from paramlod.scene.scene import Material, Scene
 from paramlod.surfels.render import FixedCount, FixedSize
 
-TOP_KEYS = {"camera", "render", "objects", "meta", "animation"}
+TOP_KEYS = {"camera", "render", "objects", "meta", "animation", "camera_path"}   # camera_path: docs/scale-out.md
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches",
                "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "translate", "rotate", "scale", "matrix", "variant",
                "instances", "sh_field", "surfels", "mesh", "lod"}
 SOURCE_KEYS = ("function", "mesh", "surfels", "sh_field")   # what an object is made of: one of them
-MESH_LODS = ("dag", "full")
+MESH_LODS = ("dag", "full", "chain")
 ANIMATION_KEYS = {"frames", "t0", "t1", "fps"}
 
 
@@ -349,7 +349,7 @@ def _check_mesh_keys(o, ck, where, i):
         ck.fail(f"{where}.params", "a mesh takes no params (they are for function objects)", "objects", i, "params")
     if o.get("lod", "dag") not in MESH_LODS:
         ck.fail(f"{where}.lod", f"must be one of {', '.join(map(repr, MESH_LODS))} (\"dag\": level of detail "
-                f"per frame, \"full\": every triangle), got {o['lod']!r}", "objects", i, "lod")
+                f"per frame, \"full\": every triangle, \"chain\": one whole-mesh level per frame), got {o['lod']!r}", "objects", i, "lod")
 
 
 def _add_mesh(scene, o, path, m, mat, ck, where, i):

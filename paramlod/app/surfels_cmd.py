@@ -1,13 +1,17 @@
-"""``paramlod surfels sample | render | info`` (paramlod/app/cli.py calls add_subparser)."""
+"""``paramlod surfels sample | render | info`` (paramlod/app/cli.py calls add_subparser). Sampling
+many files is a job of paramlod.app.dist (serial, or on Dask with --workers / --gpus / --scheduler)."""
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from paramlod.app import dist
 from paramlod.app.args import add_output, add_size, add_stats, parse_vec3, run_reporting_errors
 from paramlod.core.camera import Camera
 from paramlod.errors import SurfelError
@@ -23,9 +27,11 @@ def _check_output_folder(path: Path):
 
 
 def cmd_sample(args) -> int:
+    if len(args.source) > 1 or dist.job_requested(args):
+        return cmd_sample_job(args)
     out = Path(args.output)
     _check_output_folder(out)  # fail before the sampling, not after it
-    s = sample(args.source, args.count, views=args.views, resolution=args.resolution, seed=args.seed,
+    s = sample(args.source[0], args.count, views=args.views, resolution=args.resolution, seed=args.seed,
                progress=not args.quiet)
     s.save(out)
     note = ""
@@ -35,6 +41,51 @@ def cmd_sample(args) -> int:
     print(f"{out}: {len(s)} surfels{note}, packing {s.packing:.6g}, "
           f"radius {float(s.radii[0]):.4g} .. {float(s.radii[-1]):.4g}, "
           f"{s.meta['views']} views at {s.meta['resolution']}^2, {s.meta['rounds']} rounds")
+    return 0
+
+
+def sample_file(source: str, out: str, count: int, views: int, resolution: int, seed: int) -> dict:
+    """The task of a sampling job (paramlod.app.dist): one mesh or scene file sampled into ``out``."""
+    with warnings.catch_warnings():   # "only k of n surfels" is in the file's meta (requested vs. length)
+        warnings.simplefilter("ignore")
+        s = sample(source, count, views=views, resolution=resolution, seed=seed, progress=False)
+    s.save(out)
+    return {"surfels": len(s)}
+
+
+@dataclass(frozen=True)
+class SampledWith:
+    """check(path) for resume: a .surfels file that loads and was sampled with these settings."""
+    count: int
+    views: int
+    resolution: int
+    seed: int
+
+    def __call__(self, path) -> bool:
+        try:
+            m = SurfelSet.load(path).meta
+        except SurfelError:
+            return False
+        return (m.get("requested"), m.get("views"), m.get("resolution"), m.get("seed")) == \
+            (self.count, self.views, self.resolution, self.seed)
+
+
+def cmd_sample_job(args) -> int:
+    """``paramlod surfels sample A.ply B.ply ... -o out/{stem}.surfels``: one task per file."""
+    sources = [Path(x) for x in args.source]
+    for src in sources:
+        if not src.is_file():
+            raise SurfelError(f"{src}: no such file (sampling {len(sources)} files)")
+    items = [{"stem": src.name.split(".")[0], "name": src.name} for src in sources]
+    names = dist.format_outputs([args.output], "files", items, suffixes=(".surfels",),
+                                example="out/{stem}")
+    check = SampledWith(args.count, args.views, args.resolution, args.seed)
+    tasks = [dist.Task(str(src), sample_file, (str(src.resolve()), outs[0], args.count, args.views, args.resolution,
+                                               args.seed), outs, check)
+             for src, outs in zip(sources, names)]
+    job = dist.Job(tasks, "file", dist.WorkerSetup.from_args(args))
+    report = dist.run_job(job, dist.Where.from_args(args), progress=not args.quiet, overwrite=args.overwrite)
+    print(report.summary())
     return 0
 
 
@@ -103,13 +154,16 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="surfels_command", required=True, metavar="{sample,render,info}")
 
     s = sub.add_parser("sample", help="sample N blue surfels of a mesh or a scene file into a .surfels file")
-    s.add_argument("source", help="mesh (.obj .ply .stl .glb .gltf .off) or scene file (.toml)")
+    s.add_argument("source", nargs="+", help="mesh (.obj .ply .stl .glb .gltf .off) or scene file (.toml); "
+                                             "several make a job (docs/scale-out.md)")
     s.add_argument("-n", "--count", type=int, required=True, help="number of surfels")
-    s.add_argument("-o", "--output", required=True, help="output .surfels file")
+    s.add_argument("-o", "--output", required=True, help="output .surfels file; for several sources a pattern "
+                                                         "with {stem} or {name}, e.g. out/{stem}.surfels")
     s.add_argument("--views", type=int, default=16, help="orthographic views on a Fibonacci sphere (1..32, default 16)")
     s.add_argument("--resolution", type=int, default=512, help="G-buffer resolution per view (default 512)")
     s.add_argument("--seed", type=int, default=0, help="seed of the first sample (default 0)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    dist.add_job_options(s)
     s.set_defaults(func=cmd_sample)
 
     r = sub.add_parser("render", help="render a prefix of a .surfels file to PNG or EXR")

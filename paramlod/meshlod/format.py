@@ -8,7 +8,10 @@ CONTRACT (shared by build, cut, raster and draw; do not change field meanings):
 - ``triangles`` uint32 [T, 3]: the triangles of every cluster of every level, each cluster's
   triangles contiguous (``clusters["first"]``, ``clusters["count"]``), indices into ``vertices``.
 - ``clusters``: numpy array of ``paramlod.core.layouts.CLUSTER.dtype`` [C], level 0 first. For
-  ``lod="full"`` there is only level 0 and every cluster is a root (parent_error = +inf).
+  ``lod="full"`` there is only level 0 and every cluster is a root (parent_error = +inf). For
+  ``lod="chain"`` (paramlod.meshlod.build.chain) level k is the whole mesh simplified k times and
+  every cluster carries the mesh's one bounding sphere, its level's error and the next level's as
+  parent error, so one whole level is drawn per instance.
 - A cluster is drawn iff project(error, lod_sphere) <= T < project(parent_error, parent_sphere).
   Invariants: parent_error >= error, parent_sphere contains lod_sphere (both per cluster),
   so on every root-to-leaf path exactly one cluster passes.
@@ -21,7 +24,10 @@ paramlod.meshlod.source and ``paramlod mesh``; no twin):
   SHA-256 of every byte before it (32 bytes).
 The header holds the counts, the name and lod, the Cluster layout it was written with, ``info``
 (build settings, content hash, build seconds) and each array's dtype, shape, offset and size. The
-same MeshLod always gives the same bytes; files are written atomically. Version 1.
+same MeshLod always gives the same bytes; files are written atomically. Version 1. ``lod`` is
+"dag", "full" or "chain": a chain is the same records in the same layout, so it is one more value
+of the header's ``lod``, not a new version (a reader that does not know a value refuses the file
+with a message naming it).
 
 The cache: builds keyed by (content hash of vertices, normals and faces; lod; build settings; file
 version) in ``$PARAMLOD_CACHE/meshlod/`` or ``~/.cache/paramlod/meshlod/``, one ``<key>.meshlod``
@@ -51,7 +57,7 @@ SUFFIX = ".meshlod"
 _PREFIX = struct.Struct("<8sII")   # magic, version, header length
 _ALIGN = 16
 _DIGEST = 32
-LODS = ("dag", "full")
+LODS = ("dag", "full", "chain")
 
 
 @dataclass
@@ -61,7 +67,7 @@ class MeshLod:
     triangles: np.ndarray     # uint32 [T, 3]
     clusters: np.ndarray      # CLUSTER.dtype [C]
     name: str = "mesh"        # the file's name or "array"
-    lod: str = "dag"          # "dag" or "full"
+    lod: str = "dag"          # "dag", "full" or "chain"
     info: dict = field(default_factory=dict)   # build settings, content hash, build seconds
 
     @property

@@ -22,8 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import pyopencl as cl
-
 from paramlod.device.context import cl_device
 from paramlod.errors import MeshError
 from paramlod.meshlod.buffers import DeviceMeshes, MeshArrays, MeshInstances

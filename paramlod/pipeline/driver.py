@@ -8,8 +8,6 @@ import time
 import weakref
 from dataclasses import replace
 
-import numpy as np
-
 from paramlod.core.camera import Camera
 from paramlod.core.frame import FrameStats
 from paramlod.device.context import cl_device

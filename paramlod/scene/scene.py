@@ -37,7 +37,7 @@ INST_FLOATS = INSTANCE_F.length
 # Per-instance uint record (INSTANCE_U): function index, parameter-block offset, object id, flags.
 INST_UINTS = INSTANCE_U.length
 MAX_OBJECTS = 4095   # object ids are carried in 12 bits of the aux key (docs/frame.md); all kinds together
-MESH_LODS = ("dag", "full")
+MESH_LODS = ("dag", "full", "chain")
 MAX_PART_DEPTH = 4
 _versions = itertools.count(1)
 

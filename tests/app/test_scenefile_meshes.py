@@ -1,8 +1,7 @@
 """Scene files with meshes: ``[[objects]] mesh = "x.ply"`` with lod, material, transform, variant,
 instances (a builder or a grid), and every error naming the file, the line and the field.
 
-The "mesh" loader is wrapped as in tests/scene/test_meshes.py: the registered one (paramlod.meshlod's)
-or, while there is none, a stand-in that packs read_mesh's triangles into lod="full" clusters.
+The registered "mesh" loader (paramlod.meshlod's) is wrapped to count its calls.
 """
 import numpy as np
 import pytest
@@ -10,46 +9,21 @@ import trimesh
 
 import paramlod as pl
 from paramlod.app.scenefile import load_scene
-from paramlod.core.layouts import CLUSTER, constant
-from paramlod.meshlod.format import MeshLod
-from paramlod.renderers import registry
 from paramlod.scene import loaders
-from paramlod.scene.meshes import read_mesh
-
-
-CLUSTER_MAX_TRIANGLES = constant("CLUSTER_MAX_TRIANGLES")
-
-
-def full_lod(source, lod="dag"):
-    tm = read_mesh(source)
-    starts = np.arange(0, len(tm.faces), CLUSTER_MAX_TRIANGLES)
-    c = np.zeros(len(starts), CLUSTER.dtype)
-    c["first"], c["count"], c["group"] = starts, np.minimum(CLUSTER_MAX_TRIANGLES, len(tm.faces) - starts), range(len(c))
-    c["parent_error"] = np.inf
-    return MeshLod(tm.vertices, tm.normals, tm.faces.copy(), c, tm.name, "full")
 
 
 @pytest.fixture
 def mesh_loader():
-    previous = loaders.LOADERS.get("mesh")
-    inner, calls = previous or full_lod, []
+    """The registered "mesh" loader (paramlod.meshlod's), counting its calls."""
+    previous, calls = loaders.LOADERS["mesh"], []
 
     def counting(source, **options):
         calls.append((source, options))
-        return inner(source, **options)
+        return previous(source, **options)
 
     loaders.register_loader("mesh", counting)
-    # mesh variants to name, while paramlod.meshlod registers none
-    added = [v for v in ("meshlets", "meshlets-gl") if v not in registry.RENDERERS]
-    for v in added:
-        registry.register_renderer(registry.RendererSpec(v, "mesh", None, "mesh", "keys" if v == "meshlets" else "gl"))
     yield calls
-    for v in added:
-        registry.RENDERERS.pop(v)
-    if previous is None:
-        loaders.LOADERS.pop("mesh", None)
-    else:
-        loaders.register_loader("mesh", previous)
+    loaders.register_loader("mesh", previous)
 
 
 HEAD = """[camera]
@@ -199,3 +173,19 @@ def test_corrupt_and_degenerate_mesh_files(files, mesh_loader):
     p.write_text(p.read_text().replace("bad.stl", "flat.ply"))
     with pytest.raises(pl.SceneError, match=r"objects\[0\]\.mesh: mesh file .*flat\.ply: all 1 faces are degenerate"):
         load_scene(p)
+
+
+def test_a_chain_mesh_renders_one_level(files):
+    p = write(files, '''[[objects]]
+mesh = "meshes/ball.ply"
+lod = "chain"
+''')
+    sf = load_scene(p)
+    (m,) = sf.scene.meshes
+    assert m.mesh.lod == "chain" and m.mesh.levels >= 1
+    sf.settings.mesh.cull_backface = sf.settings.mesh.cull_frustum = False
+    f = pl.render(sf.scene, sf.camera, settings=sf.settings)
+    assert (f.object_id == 1).sum() > 0
+    c = m.mesh.clusters
+    per_level = [int(c["count"][c["level"] == k].sum()) for k in range(m.mesh.levels)]
+    assert f.stats["triangles_drawn"] in per_level   # one whole level, whichever the camera asks for

@@ -1,10 +1,8 @@
 """Mesh sources: paramlod.scene.meshes.read_mesh over every format and bad input, and the scene's
 add_mesh / add_mesh_instances (validation, one load per source, object ids, subscenes).
 
-The scene asks the loader registry for a "mesh" MeshLod. The fixture ``mesh_loader`` wraps the
-registered loader (paramlod.meshlod's, once it registers one) or, while there is none, a stand-in
-that packs read_mesh's triangles into lod="full" clusters; it counts the calls. The tests check
-only what both give.
+The scene asks the loader registry for a "mesh" MeshLod; the fixture ``mesh_loader`` wraps the
+registered loader (paramlod.meshlod's) and counts the calls.
 """
 import warnings
 
@@ -13,51 +11,23 @@ import pytest
 import trimesh
 
 import paramlod as pl
-import paramlod.meshlod  # noqa: F401  (registers the "mesh" loader once it exists)
-from paramlod.core.layouts import CLUSTER, constant
 from paramlod.errors import MeshError, SceneError
-from paramlod.meshlod.format import MeshLod
 from paramlod.scene import loaders
 from paramlod.scene.meshes import read_mesh, source_key
 
 
-CLUSTER_MAX_TRIANGLES = constant("CLUSTER_MAX_TRIANGLES")
-
-
-def full_lod(source, lod="dag"):
-    """A stand-in "mesh" loader: read_mesh's triangles in clusters of 128, every one a root."""
-    tm = read_mesh(source)
-    f = tm.faces
-    starts = np.arange(0, len(f), CLUSTER_MAX_TRIANGLES)
-    c = np.zeros(len(starts), CLUSTER.dtype)
-    for k, s in enumerate(starts):
-        p = tm.vertices[f[s:s + CLUSTER_MAX_TRIANGLES]].reshape(-1, 3).astype(np.float64)
-        centre = (p.min(axis=0) + p.max(axis=0)) / 2
-        sphere = [*centre, np.sqrt(((p - centre) ** 2).sum(axis=1).max())]
-        c[k]["sphere"] = c[k]["lod_sphere"] = c[k]["parent_sphere"] = sphere
-        c[k]["cone"] = (0, 0, 1, 2.0)   # cutoff > 1: never culled
-        c[k]["first"], c[k]["count"], c[k]["group"] = s, min(CLUSTER_MAX_TRIANGLES, len(f) - s), k
-    c["parent_error"] = np.inf
-    return MeshLod(tm.vertices, tm.normals, f.copy(), c, tm.name, "full")
-
-
 @pytest.fixture
 def mesh_loader():
-    """The calls the scene made to the "mesh" loader, as (source, options)."""
-    previous = loaders.LOADERS.get("mesh")
-    inner = previous or full_lod
-    calls = []
+    """The calls the scene made to the registered "mesh" loader (paramlod.meshlod's), as (source, options)."""
+    previous, calls = loaders.LOADERS["mesh"], []
 
     def counting(source, **options):
         calls.append((source, options))
-        return inner(source, **options)
+        return previous(source, **options)
 
     loaders.register_loader("mesh", counting)
     yield calls
-    if previous is None:
-        loaders.LOADERS.pop("mesh", None)
-    else:
-        loaders.register_loader("mesh", previous)
+    loaders.register_loader("mesh", previous)
 
 
 def icosphere(subdiv=1):
@@ -320,7 +290,7 @@ def test_add_mesh_instances(mesh_loader):
     ({"count": 2, "colors": [[1, 0, 0]]}, r"colors must be a \[2, 3\] array of values in \[0, 1\]"),
     ({"count": 1, "colors": [[1.5, 0, 0]]}, r"colors must be a \[1, 3\] array"),
     ({"count": 1, "colors": [[np.nan, 0, 0]]}, r"colors must be"),
-    ({"count": 1, "lod": "chain"}, r"lod must be one of 'dag', 'full', got 'chain'"),
+    ({"count": 1, "lod": "nanite"}, r"lod must be one of 'dag', 'full', 'chain', got 'nanite'"),
     ({"count": 1, "material": (1, 0, 0)}, r"material must be a paramlod\.Material"),
     ({"count": 1, "variant": ""}, r"variant must be a name"),
     ({"count": 1, "aa": 4}, r"aa must be a name"),

@@ -7,7 +7,10 @@ spent preparing and enqueueing a frame (host) and the time the device waited (id
 transfer of the tessellation variant, patches per LOD step, render patches, pixels written,
 overdraw, our device buffers and the host RSS. In the same run: the random 64-bit
 atom_min ceiling, the tessellated triangles/s of a trivial function, the OpenCL evaluation
-throughput of every built-in function, and the blue-surfel sampling and prefix-rendering costs.
+throughput of every built-in function, and the blue-surfel sampling and prefix-rendering costs;
+the mesh LOD measurements (extra "meshes", paramlod.app.bench.meshes) and, on request, the mesh-LOD
+evaluation of full mesh / discrete chain / cluster DAG (extra "mesh-eval",
+paramlod.app.bench.mesh_eval). ``--only-extras`` skips the parametric scenarios.
 Results go to DIR/results.json (written after every measurement), DIR/results.md and plots.
 """
 from __future__ import annotations
@@ -25,6 +28,8 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from paramlod.app.args import add_size
+from paramlod.app.bench.mesh_eval import SCENARIOS as EVAL_SCENARIOS, THRESHOLDS as EVAL_THRESHOLDS
+from paramlod.app.bench.mesh_eval import format_mesh_eval, plot_mesh_eval, run_mesh_eval
 from paramlod.app.bench.meshes import format_meshes, run_meshes
 from paramlod.app.bench.scenes import DEFAULT, SCENARIOS
 from paramlod.core.camera import Camera
@@ -62,10 +67,20 @@ def add_arguments(p):
     p.add_argument("--frames", type=int, default=8, help="timed frames per orbit (default 8)")
     p.add_argument("--warmup", type=int, default=2, help="untimed frames before each orbit (default 2)")
     p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels", "meshes"],
-                   choices=["ceilings", "functions", "surfels", "meshes"], help="extra measurements (default all)")
+                   choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval"],
+                   help="extra measurements (default all but mesh-eval, the full / chain / DAG evaluation)")
+    p.add_argument("--only-extras", action="store_true", help="skip the parametric scenarios: only the extras")
     p.add_argument("--big-mesh", choices=["auto", "yes", "no"], default="auto",
                    help="also measure a 1.6 M-triangle mesh (default: on a GPU only)")
     p.add_argument("--mesh-grid", type=int, default=10, help="copies per side of the mesh grid (default 10)")
+    p.add_argument("--eval-thresholds", type=float, nargs="+", default=list(EVAL_THRESHOLDS),
+                   help="mesh-eval: LOD thresholds in pixels (default 0.25 0.5 1 2 4)")
+    p.add_argument("--eval-scenarios", nargs="+", choices=list(EVAL_SCENARIOS), default=list(EVAL_SCENARIOS),
+                   help="mesh-eval: scenarios (default grid path close move)")
+    p.add_argument("--eval-move-frames", type=int, default=24,
+                   help="mesh-eval: frames of the slow move that measures popping (default 24)")
+    p.add_argument("--eval-parts", type=int, default=1000,
+                   help="mesh-eval: parts of the many-parts mesh, 80 triangles each (default 1000; 0: none)")
     p.add_argument("--out", default="out/bench", help="folder for results (default out/bench)")
 
 
@@ -265,7 +280,9 @@ def surfel_costs(size) -> dict:
 # --- driver -----------------------------------------------------------------------------------------
 def run_bench(args) -> int:
     size = args.size
-    names = args.scenarios or DEFAULT
+    names = [] if args.only_extras else args.scenarios or DEFAULT
+    if args.only_extras and args.scenarios:
+        raise ParamlodError(f"--only-extras skips the scenarios; leave out {' '.join(args.scenarios)} or the option")
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
         raise ParamlodError(f"unknown scenario(s) {', '.join(unknown)} (available: {', '.join(SCENARIOS)})")
@@ -319,6 +336,12 @@ def run_bench(args) -> int:
         result["meshes"] = run_meshes(size, args.frames, args.warmup, big, args.mesh_grid,
                                       log=lambda m: print(m, flush=True))
         save()
+    if "mesh-eval" in args.extras:
+        big = args.big_mesh == "yes" or (args.big_mesh == "auto" and dev.is_gpu)
+        result["mesh_eval"] = run_mesh_eval(size, args.frames, args.warmup, big, args.mesh_grid, args.eval_thresholds,
+                                            args.eval_move_frames, args.eval_parts, args.eval_scenarios,
+                                            log=lambda m: print(m, flush=True))
+        save()
     md = format_markdown(result)
     write_atomically(out / "results.md", lambda tmp: Path(tmp).write_text(md))
     plots = make_plots(result, out)
@@ -340,8 +363,9 @@ def format_markdown(result) -> str:
     if "tess_ceiling" in result:
         t = result["tess_ceiling"]
         lines.append(f"Tessellation ceiling (sphere, level {t['level']}): {_rate(t['triangles_per_s'])} triangles/s.")
-    lines += ["", "| scenario | variant | distance | FPS | frame ms (p95) | LOD ms | render ms | host ms | render patches | % of ceiling |",
-              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    if result["scenarios"]:
+        lines += ["", "| scenario | variant | distance | FPS | frame ms (p95) | LOD ms | render ms | host ms | render patches "
+                  "| % of ceiling |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, sc in result["scenarios"].items():
         for vname, rows in sc["variants"].items():
             for r in rows:
@@ -369,11 +393,14 @@ def format_markdown(result) -> str:
         lines += [f"| {r['prefix']:,} | {r['ms']:.3f} |" for r in s["render"]]
     if "meshes" in result:
         lines += format_meshes(result["meshes"], ceil, result.get("tess_ceiling", {}).get("triangles_per_s"))
+    if "mesh_eval" in result:
+        lines += format_mesh_eval(result["mesh_eval"])
     return "\n".join(lines) + "\n"
 
 
 def make_plots(result, out: Path) -> list[Path]:
-    """FPS against distance per scenario, and patches per LOD step at the nearest distance."""
+    """FPS against distance per scenario, and patches per LOD step at the nearest distance; the
+    mesh-LOD evaluation's plots (paramlod.app.bench.mesh_eval.plot_mesh_eval)."""
     try:
         import matplotlib
 
@@ -406,4 +433,6 @@ def make_plots(result, out: Path) -> list[Path]:
         fig.savefig(p, dpi=90)
         plt.close(fig)
         paths.append(p)
+    if "mesh_eval" in result:
+        paths += plot_mesh_eval(result["mesh_eval"], out)
     return paths
