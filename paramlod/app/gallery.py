@@ -29,7 +29,8 @@ def _aa(sf, variant: str, stats: dict) -> str:
     if variant == "points-ssaa":
         n = sf.settings.ssaa.ss
         return f"{n * n}xSS (local framebuffer)"
-    return "noAA"
+    ss = int(stats.get("supersample", 1))
+    return f"{ss * ss}xSS" if ss > 1 else "noAA"
 
 
 def render_scene_file(path, size=None):
@@ -58,8 +59,10 @@ def caption(sf, frame, variant: str, device: str, elapsed_ms: float) -> dict:
         "variant": variant,
         "aa": _aa(sf, sf.variant if not sf.object_variants else variant, s),
         "size": list(frame.size),
-        "instances": sf.scene.instance_count,
+        "instances": sf.scene.instance_count + sum(m.count for m in sf.scene.meshes),
         "render_patches": patches,
+        "clusters": s.get("clusters_drawn"),       # meshes: the cut's clusters and triangles
+        "triangles": s.get("triangles_drawn"),
         "lod_ms": ms.get("lod"),
         "render_ms": ms.get("render", ms.get("draw")),
         "frame_ms": elapsed_ms,
@@ -81,7 +84,8 @@ def markdown(captions: list[dict]) -> str:
             lines += [c["caption"], ""]
         lines += [f"{c['variant']}, {c['aa']}, {c['size'][0]}×{c['size'][1]}, {c['instances']:,} instances, "
                   f"{c['render_patches'] if c['render_patches'] is not None else 'n/a'} render patches, "
-                  f"LOD {_fmt(c['lod_ms'])} ms, render {_fmt(c['render_ms'])} ms, whole frame {_fmt(c['frame_ms'])} ms "
+                  + (f"{c['clusters']:,} clusters and {c['triangles']:,} triangles drawn, " if c.get("clusters") else "")
+                  + f"LOD {_fmt(c['lod_ms'])} ms, render {_fmt(c['render_ms'])} ms, whole frame {_fmt(c['frame_ms'])} ms "
                   f"(first frame includes kernel compilation), on {c['device']}.", ""]
     return "\n".join(lines)
 
