@@ -104,3 +104,7 @@ def fiber_curtain(loops: int = CURTAIN_LOOPS, rows: int = CURTAIN_ROWS, fibers: 
     shared = {name: float(val) for name, val in values.items() if name != "phi"}
     return {"count": n, "params": shared, "per_instance": {"phi": phi.astype(np.float32)},
             "transforms": np.repeat(m, fibers, axis=0)}
+
+
+# instance builders that scene files may name (paramlod.function.registry)
+BUILDERS = {"fiber_curtain": fiber_curtain}

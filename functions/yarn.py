@@ -90,3 +90,7 @@ def yarn_curtain(loops: int = CURTAIN_LOOPS, rows: int = CURTAIN_ROWS, row_spaci
     _, _, m = curtain_layout(loops, rows, spacing)
     n = len(m)
     return {"count": n, "params": {k: float(v) for k, v in values.items()}, "per_instance": {}, "transforms": m}
+
+
+# instance builders that scene files may name (paramlod.function.registry)
+BUILDERS = {"yarn_curtain": yarn_curtain}

@@ -5,6 +5,7 @@ from paramlod.core.frame import Frame, FrameStats
 from paramlod.core.transforms import matrix, rotate, scale, translate
 from paramlod.errors import CapacityError, DeviceError, FunctionError, ParamlodError, SceneError
 from paramlod.function.define import ParametricFunction, Part, evaluate, parametric
+from paramlod.function.registry import register_builder
 from paramlod.lod.stage import LodSettings
 from paramlod.meshlod import MeshLod, MeshSettings, load_mesh
 from paramlod.pipeline.driver import render, render_on_device
@@ -20,5 +21,5 @@ __all__ = [
     "ParametricFunction", "Part", "dsl", "evaluate", "parametric", "Camera", "Material", "Scene",
     "matrix", "rotate", "scale", "translate", "Frame", "FrameStats", "LodSettings", "PointSettings",
     "SsaaSettings", "TessSettings", "RenderSettings", "render", "render_on_device", "variants",
-    "MeshLod", "MeshSettings", "load_mesh",
+    "MeshLod", "MeshSettings", "load_mesh", "register_builder",
 ]

@@ -255,16 +255,82 @@ def _round_up(n, m):
     return max(m, (n + m - 1) // m * m)
 
 
-def default_camera(surfels: SurfelSet, size=(512, 512), fov_y: float = 35.0, direction=(1.0, 0.6, 1.4)):
-    """A perspective camera that frames the set's bounding sphere from ``direction``."""
-    c, r = surfels.bounding_sphere()
+# The resting-face test of up_axis: a surfel lies on a bounding-box face when it is within this
+# fraction of the box's largest extent of it and its normal is within ~14 degrees of the face's.
+_FACE_BAND, _FACE_COS = 0.02, 0.97
+
+
+def up_axis(surfels: SurfelSet) -> np.ndarray:
+    """The set's up direction, a unit world axis: opposite the bounding-box face the object rests on
+    (scans and models standing on a ground have a flat base: many surfels on one face, facing out of
+    it), else +y (the OBJ / glTF convention). Scans are often z-up, so y-up alone lays them on their side."""
+    p, n = surfels.positions.astype(np.float64), surfels.normals.astype(np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    band = _FACE_BAND * float(np.max(hi - lo))
+    share = {}
+    for a in range(3):
+        for sign, face in ((-1, lo[a]), (1, hi[a])):
+            on = (np.abs(p[:, a] - face) <= band) & (sign * n[:, a] > _FACE_COS)
+            share[(a, sign)] = float(on.mean()) if len(p) else 0.0
+    ranked = sorted(share, key=share.get, reverse=True)
+    (a, sign), runner_up = ranked[0], share[ranked[1]]
+    up = np.zeros(3)
+    # a base: at least 1% of the surfels and clearly more than any other face (a cube has six)
+    if share[(a, sign)] >= 0.01 and share[(a, sign)] >= 3 * runner_up:
+        up[a] = -sign
+    else:
+        up[1] = 1.0
+    return up
+
+
+def principal_frame(surfels: SurfelSet, up=None):
+    """(right, up, front) unit vectors: ``up`` (default up_axis), ``right`` the set's major principal
+    axis across ``up`` (world axes when the spread across ``up`` is about round: the principal axes of
+    a round set are noise), pointing to the set's longer tail along it, ``front = right x up`` (+z for
+    y-up, -y for z-up data). The frame turns with the data: a set stored rotated by R gets R times it."""
+    up = up_axis(surfels) if up is None else np.asarray(up, np.float64)
+    up = up / np.linalg.norm(up)
+    p = surfels.positions.astype(np.float64)
+    flat = (p - p.mean(axis=0)) - np.outer((p - p.mean(axis=0)) @ up, up)
+    w, v = np.linalg.eigh(flat.T @ flat / max(1, len(p)))   # ascending; w[0] ~ 0 along up
+    right = v[:, 2]
+    if w[2] <= 1.2 * w[1]:
+        # about round across up: the world axis most across up (x unless up is x)
+        axes = np.eye(3)
+        right = axes[int(np.argmin(np.abs(axes @ up)))] if abs(up[0]) > 0.5 else axes[0]
+        right = right - (right @ up) * up
+    right = right / np.linalg.norm(right)
+    # a principal axis has no sign: take the one with the set's longer tail (positive skewness), which
+    # turns with the data; a set about symmetric along it points it along +world instead
+    x = flat @ right
+    sd = float(np.std(x))
+    skew = float(np.mean(x ** 3)) / sd ** 3 if sd > 0 else 0.0
+    if (skew < 0) if abs(skew) > 0.05 else (right[int(np.argmax(np.abs(right)))] < 0):
+        right = -right
+    return right, up, np.cross(right, up)
+
+
+def default_camera(surfels: SurfelSet, size=(512, 512), fov_y: float = 35.0, direction=(1.0, 0.6, 1.4),
+                   up=None):
+    """A perspective camera that frames the set's bounding sphere from ``direction``, given in the
+    set's principal frame (right, up, front; see principal_frame): a 3/4 view of its widest side,
+    upright. ``up`` overrides the automatic up axis."""
+    right, up, front = principal_frame(surfels, up)
+    # the sphere around the box in that frame (not the world box): the same framing however the set is stored
+    basis = np.stack([right, up, front], axis=1)
+    p = surfels.positions.astype(np.float64)
+    q = p @ basis
+    mid = (q.min(axis=0) + q.max(axis=0)) / 2
+    c = basis @ mid
+    r = max(float(np.sqrt(np.max(np.sum((q - mid) ** 2, axis=1)))), float(np.max(surfels.radii)), 1e-12)
     d = np.asarray(direction, np.float64)
+    d = d[0] * right + d[1] * up + d[2] * front
     d /= np.linalg.norm(d)
     w, h = size
     half = np.radians(fov_y) / 2
     fit = min(np.tan(half), np.tan(half) * w / h)
     dist = 1.1 * r / np.sin(np.arctan(fit))
-    return Camera.look_at(c + d * dist, c, up=(0, 1, 0), fov_y=fov_y, size=size,
+    return Camera.look_at(c + d * dist, c, up=up, fov_y=fov_y, size=size,
                           near=max(dist - 2 * r, dist * 1e-3), far=dist + 2 * r)
 
 

@@ -5,11 +5,156 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
+import tempfile
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
 
 from paramlod.errors import ParamlodError
 
 MAX_SIDE = 16384   # the largest image side any command renders (scene files share the limit)
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, like every other error of paramlod
+    (``paramlod: error: argument --size: ...``, exit status 2), not the usage block. Subparsers
+    made with ``add_parser`` share the class."""
+
+    def error(self, message):
+        self.exit(2, f"paramlod: error: {message} (see {self.prog} --help)\n")
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1 (frame counts, repeats)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return v
+
+
+def non_negative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
+    return v
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0 (distances, scales)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number > 0, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return v
+
+
+def check_folder(folder, flag: str, create: bool = False) -> Path:
+    """``folder`` exists (or, with ``create``, can be made) and a file can be created in it: probed
+    with a real temporary file, so read-only file systems, permissions and /proc are all caught
+    before any work. Raises ParamlodError naming ``flag``."""
+    folder = Path(folder) if str(folder) else Path(".")
+    if create and not folder.exists():
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ParamlodError(f"{flag}: cannot create folder {folder}: {exc.strerror or exc}") from None
+    if not folder.is_dir():
+        what = "is not a folder" if folder.exists() else "does not exist"
+        raise ParamlodError(f"{flag}: folder {folder} {what}")
+    try:
+        with tempfile.TemporaryFile(dir=folder, prefix=".paramlod-probe-"):
+            pass
+    except OSError as exc:
+        raise ParamlodError(f"{flag}: folder {folder} is not writable ({exc.strerror or exc})") from None
+    return folder
+
+
+def check_outputs(paths, flag: str = "-o/--output", suffixes=(".png", ".exr")) -> list[Path]:
+    """Every output path, before any work: a known suffix, no path twice, not an existing folder,
+    and a writable folder (``check_folder``). Raises ParamlodError naming ``flag`` and the path."""
+    out, seen = [], set()
+    for p in paths:
+        path = Path(p)
+        if suffixes and path.suffix.lower() not in suffixes:
+            raise ParamlodError(f"{flag} {p}: unknown file type {path.suffix or '(none)'!r} "
+                                f"(use {' or '.join(suffixes)})")
+        key = os.path.realpath(path)
+        if key in seen:
+            raise ParamlodError(f"{flag} {p}: given twice")
+        seen.add(key)
+        if path.is_dir():
+            raise ParamlodError(f"{flag} {p}: is a folder")
+        check_folder(path.parent, f"{flag} {p}")
+        out.append(path)
+    return out
+
+
+def write_all_or_none(items) -> None:
+    """``items``: (path, write(path)) pairs. Writes each (each atomically); when one fails, the
+    outputs this call has already written are removed again, so a command leaves all or none."""
+    done = []
+    try:
+        for path, write in items:
+            existed = Path(path).exists()
+            write(path)
+            if not existed:
+                done.append(Path(path))
+    except BaseException:
+        for path in done:
+            path.unlink(missing_ok=True)
+        raise
+
+
+SPINNER = "|/-\\"
+PROGRESS_ENV = "PARAMLOD_PROGRESS"   # "1": show progress even when stderr is not a terminal; "0": never
+
+
+@contextmanager
+def progress(stage: str, delay: float = 2.0, stream=None):
+    """A spinner with ``stage`` and the seconds spent, on stderr, for a step that takes longer than
+    ``delay`` seconds (quick steps print nothing); on a terminal only, unless PARAMLOD_PROGRESS=1.
+    The line is erased when the step ends, so the command's own output stays as it was."""
+    stream = stream or sys.stderr
+    mode = os.environ.get(PROGRESS_ENV, "")
+    show = mode == "1" or (mode != "0" and getattr(stream, "isatty", lambda: False)())
+    if not show:
+        yield
+        return
+    stop = threading.Event()
+    start = time.monotonic()
+    shown = []
+
+    def spin():
+        if stop.wait(delay):
+            return
+        for k in range(1 << 62):
+            stream.write(f"\r{SPINNER[k % 4]} {stage} ... {time.monotonic() - start:.0f} s ")
+            stream.flush()
+            shown.append(True)
+            if stop.wait(0.25):
+                return
+
+    thread = threading.Thread(target=spin, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+        if shown:
+            stream.write(f"\r{stage}: {time.monotonic() - start:.1f} s" + " " * 12 + "\n")
+            stream.flush()
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -60,6 +205,10 @@ def run_reporting_errors(call) -> int:
         return call()
     except ParamlodError as exc:
         print(f"paramlod: error: {exc}", file=sys.stderr)
+        return 2
+    except RecursionError:   # a plugin's expression nested past Python's stack: one line, not 2,000
+        print("paramlod: error: an expression is nested too deeply to handle (Python's recursion limit); "
+              "name intermediate results with let(...)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("paramlod: interrupted", file=sys.stderr)

@@ -3,13 +3,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
 from pathlib import Path
 
-from paramlod.app import dist, gallery, glyphs, mesh_cmd, surfels_cmd
-from paramlod.app.args import add_size, add_stats, run_reporting_errors
+from paramlod.app import dist, gallery, glyphs, mesh_cmd, scenefile, surfels_cmd
+from paramlod.app.args import Parser, add_size, add_stats, check_outputs, progress, run_reporting_errors, write_all_or_none
 from paramlod.app.bench import run as bench
 from paramlod.device import context as device_context
+from paramlod.core.files import write_atomically
 from paramlod.errors import ParamlodError
 from paramlod.function import registry
 from paramlod.pipeline.driver import render
@@ -20,17 +23,41 @@ def _render_job_requested(args) -> bool:
             or args.video is not None or args.fps is not None or dist.job_requested(args))
 
 
+def _finite_time(text: str) -> float:
+    try:
+        t = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number (scene time), got {text!r}") from None
+    if not math.isfinite(t):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return t
+
+
 def cmd_render(args) -> int:
     if _render_job_requested(args):
+        if args.time is not None:
+            raise ParamlodError("--time is for one frame; a job of frames takes its times from --frames/--fps")
         return cmd_render_job(args)
-    sf, variant = dist.prepare_scene(args.scene[0], args.size, args.variant, args.aa)
-    camera = sf.camera
-    frame = render(sf.scene, camera, variant=variant, settings=sf.settings)
-    label = dist.variant_label(sf, args.variant)
     outs = args.output or [str(Path("out") / (Path(args.scene[0]).stem + ".png"))]
-    for out in outs:
-        frame.save(out)
+    if not args.output:
+        Path("out").mkdir(exist_ok=True)
+    # every output is checked before any work: a bad one fails the command with nothing written
+    check_outputs(outs)
+    if args.stats:
+        check_outputs([args.stats], "--stats", suffixes=(".json",))
+    with progress("loading the scene"):
+        sf, variant = dist.prepare_scene(args.scene[0], args.size, args.variant, args.aa)
+    camera = sf.camera
+    with progress(f"rendering {camera.width}x{camera.height}"):
+        frame = render(sf.scene, camera, variant=variant, settings=sf.settings, time=args.time)
+    label = dist.variant_label(sf, args.variant)
     s = frame.stats
+    items = [(out, frame.save) for out in outs]
+    if args.stats:
+        text = json.dumps(s, indent=2)
+        items.append((args.stats, lambda p: write_atomically(p, lambda tmp: Path(tmp).write_text(text))))
+    with progress("writing"):
+        write_all_or_none(items)
     ms = s["ms"]
     device = s.get("device") or s.get("lod_device")
     parts = [f"{camera.width}x{camera.height} {label}" + (f" on {device}" if device else "")]
@@ -38,8 +65,8 @@ def cmd_render(args) -> int:
         parts.append(f"{s['render_patches']} render patches")
     parts.append(f"{s['pixels_written']} pixels, {ms['total']:.1f} ms")
     print(f"{', '.join(outs)}: " + ", ".join(parts))
-    if args.stats:
-        Path(args.stats).write_text(json.dumps(s, indent=2))
+    for w in s.get("warnings", []):   # e.g. nothing_drawn: the frame drew no pixel, and why
+        print(f"paramlod: warning: {w}", file=sys.stderr)
     return 0
 
 
@@ -80,14 +107,19 @@ def cmd_functions(args) -> int:
             for p in fn.params) or "-"
         print(f"{name:20s} u=[{fn.u_range[0]:.4g}, {fn.u_range[1]:.4g}] v=[{fn.v_range[0]:.4g}, {fn.v_range[1]:.4g}]"
               f"  params: {params}  ({fn.source})")
+        if fn.summary:   # the first line of its docstring (docs/writing-plugins.md promises it)
+            print(f"{'':20s} {fn.summary}")
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="paramlod", description=__doc__)
+    p = Parser(prog="paramlod", description=__doc__)
     p.add_argument("--cl-device", help="OpenCL device by name substring (or PARAMLOD_CL_DEVICE)")
     p.add_argument("--functions", action="append", metavar="DIR",
                    help="a folder of plugin .py files (repeatable; or PARAMLOD_FUNCTIONS_PATH)")
+    p.add_argument("--trust-scene", action="store_true",
+                   help="let scene files name any importable module:function as an instance builder: this "
+                        "RUNS CODE named by the scene file; without it only registered builders are allowed")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("render", help="render a TOML scene to PNG and/or EXR (one frame, or a job of frames)")
@@ -102,6 +134,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--aa", help="anti-aliasing: noAA, msaa2/4/8, ssaa2x2/3x3/4x4, or a combination such "
                                 "as 4xSS+8xMS (tess); the points variant takes the supersampling only")
     add_stats(r)
+    r.add_argument("--time", type=_finite_time, metavar="T",
+                   help="scene time of the frame (the implicit parameter t of animated functions; default 0)")
     a = r.add_argument_group("frames (a job: each frame is a task, see docs/scale-out.md)")
     a.add_argument("--frames", type=dist.parse_range, metavar="A:B",
                    help="frames A to B-1 (A:B:STEP, one number, or 'all' of the [animation] table); frame i is "
@@ -149,7 +183,18 @@ def main(argv=None) -> int:
             device_context.set_cl_device(args.cl_device)
         for folder in args.functions or []:
             registry.add_plugin_path(folder)
-        return args.func(args)
+        if not args.trust_scene:
+            return args.func(args)
+        # through the environment, so that Dask workers (child processes) trust the scenes too
+        old = os.environ.get(scenefile.TRUST_ENV)
+        os.environ[scenefile.TRUST_ENV] = "1"
+        try:
+            return args.func(args)
+        finally:
+            if old is None:
+                os.environ.pop(scenefile.TRUST_ENV, None)
+            else:
+                os.environ[scenefile.TRUST_ENV] = old
 
     return run_reporting_errors(run)
 

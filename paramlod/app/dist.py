@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-from paramlod.app.args import parse_size
+from paramlod.app.args import check_folder, parse_size
 from paramlod.app.scenefile import load_scene
 from paramlod.core.camera import Camera
 from paramlod.core.files import write_atomically
@@ -535,6 +535,10 @@ def format_outputs(patterns, what: str, items: list[dict], suffixes=IMAGE_SUFFIX
             seen[name] = True
             names.append(name)
         out.append(tuple(names))
+    # every folder the job writes into is made and probed now, before any task runs
+    pattern_of = {str(Path(n).parent): p for names in out for n, p in zip(names, patterns)}
+    for folder, p in pattern_of.items():
+        check_folder(folder, f"-o {p}", create=True)
     return out
 
 
@@ -596,7 +600,7 @@ def _scene_entry(path, size, variant, aa, cache: bool = True) -> dict:
     _STATE["loads"] += 1
     if aa:
         v = variant or (None if sf.object_variants else sf.variant)
-        sf.settings.apply_aa(aa, points_only=v == "points")
+        sf.settings.apply_aa(aa, points_only=v == "points", variant=v)
     if variant:   # --variant draws every object with it (meshes with the mesh variant that goes with it)
         for obj in [*sf.scene.objects, *sf.scene.meshes]:
             obj.variant = obj.aa = None

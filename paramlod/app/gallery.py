@@ -18,7 +18,9 @@ from paramlod.pipeline.driver import render
 
 def add_arguments(p):
     p.add_argument("--scenes", default="gallery", help="folder of .toml scenes (default gallery)")
-    p.add_argument("--out", default="gallery/images", help="output folder (default gallery/images)")
+    # not gallery/images: a trial render must not overwrite the committed images (--out gallery/images does)
+    p.add_argument("--out", default="out/gallery", help="output folder (default out/gallery; the committed "
+                                                        "gallery is made with --out gallery/images)")
     add_size(p, what="override every scene's size")
     p.add_argument("--only", nargs="+", metavar="NAME", help="render only these scenes (file stems)")
 
@@ -75,7 +77,8 @@ def _fmt(x, nd=1):
 
 
 def markdown(captions: list[dict]) -> str:
-    lines = ["# Gallery", "", "Rendered by `paramlod gallery` from the scene files in `gallery/`; "
+    lines = ["# Gallery", "", "Rendered by `paramlod gallery` from the scene files in `gallery/` (the repository's "
+             "`gallery/images` is made with `--out gallery/images`; the default folder is `out/gallery`); "
              "each caption gives the variant, anti-aliasing, render patches, LOD and render times and the "
              "device (OpenCL / OpenGL) that produced the image.", ""]
     for c in captions:

@@ -35,6 +35,10 @@ def add_subparser(sub):
                         "e.g. out/slice_{slice:03d}.png; slices without a voxel to draw are skipped")
     g.add_argument("--color", choices=["direction", "none"], default="direction",
                    help="colour by the largest lobe's direction (default) or plain")
+    g.add_argument("--subtract-min", action="store_true",
+                   help="lower each glyph by its minimum over the sphere (min-max display normalization: "
+                        "no negative lobes, sharper shapes; recommended for ODFs that dip below zero, "
+                        "such as dipy's CSA fits)")
     g.add_argument("--variant", default="points", help="render variant (points, points-ssaa, tess)")
     add_size(g, "960x960")
     add_output(g)
@@ -44,7 +48,7 @@ def add_subparser(sub):
     return g
 
 
-def glyph_frame(path, basis, legacy, mask, stride, k, color, variant, size):
+def glyph_frame(path, basis, legacy, mask, stride, k, color, variant, size, subtract_min=False):
     """(Frame, ShField) of the volume (or axial slice ``k``), framed from above."""
     path = Path(path)
     if path.suffix == ".npz":
@@ -52,16 +56,16 @@ def glyph_frame(path, basis, legacy, mask, stride, k, color, variant, size):
     else:
         region = (slice(None), slice(None), slice(k, k + 1)) if k is not None else None
         field = load_sh_volume(path, basis, mask=mask, stride=stride, legacy=legacy, region=region)
-    scene = field.to_scene(color_by=None if color == "none" else "direction")
+    scene = field.to_scene(color_by=None if color == "none" else "direction", subtract_min=subtract_min)
     camera = framing_camera(scene, (0.0, -0.35, 1.0), (0, 1, 0), 40.0, size)
     return render(scene, camera, variant), field
 
 
-def render_slice(path, basis, legacy, mask, stride, k, color, variant, size, outputs) -> dict:
+def render_slice(path, basis, legacy, mask, stride, k, color, variant, size, outputs, subtract_min=False) -> dict:
     """The task of a ``--slices`` job: slice ``k`` saved to ``outputs``; a slice without a voxel
     to draw writes nothing and says so."""
     try:
-        frame, field = glyph_frame(path, basis, legacy, mask, stride, k, color, variant, size)
+        frame, field = glyph_frame(path, basis, legacy, mask, stride, k, color, variant, size, subtract_min)
     except DmriError as exc:
         if EMPTY_REGION in str(exc):
             return {"empty": True}
@@ -75,11 +79,13 @@ def run_glyphs(args) -> int:
     if args.slices is not None or dist.job_requested(args):
         return run_slices(args)
     frame, field = glyph_frame(args.path, args.basis, args.legacy, args.mask, args.stride, args.slice, args.color,
-                               args.variant, args.size)
+                               args.variant, args.size, args.subtract_min)
     for out in args.output:
         frame.save(out)
     print(f"{', '.join(args.output)}: {len(field)} glyphs of order {field.order} ({field.source_basis}"
-          f"{', legacy' if field.source_legacy else ''}), {frame.stats.get('render_patches', '?')} render patches")
+          f"{', legacy' if field.source_legacy else ''}"
+          f"{', minimum subtracted' if args.subtract_min else ''}), "
+          f"{frame.stats.get('render_patches', '?')} render patches")
     return 0
 
 
@@ -99,7 +105,7 @@ def run_slices(args) -> int:
     check = dist.image_check(args.size)
     tasks = [dist.Task(f"{path.name} slice {k}", render_slice,
                        (str(path.resolve()), args.basis, args.legacy, mask, args.stride, k, args.color, args.variant,
-                        tuple(args.size), outs), outs, check)
+                        tuple(args.size), outs, args.subtract_min), outs, check)
              for k, outs in zip(slices, names)]
     job = dist.Job(tasks, "slice", dist.WorkerSetup.from_args(args))
     report = dist.run_job(job, dist.Where.from_args(args), progress=not args.quiet, overwrite=args.overwrite)

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from paramlod.app import dist
-from paramlod.app.args import run_reporting_errors
+from paramlod.app.args import Parser, check_folder, run_reporting_errors
 from paramlod.errors import MeshError
 from paramlod.meshlod.format import LODS, SUFFIX, load_meshlod, mesh_info, save_meshlod
 from paramlod.meshlod.source import load_mesh
@@ -19,9 +19,9 @@ from paramlod.meshlod.source import load_mesh
 def _check_output(out: Path, source: Path):
     if not out.name.lower().endswith(SUFFIX):
         raise MeshError(f"cannot write {out}: the output must be a {SUFFIX} file (e.g. -o {source.stem}{SUFFIX})")
-    folder = out.parent if str(out.parent) else Path(".")
-    if not folder.is_dir():
-        raise MeshError(f"cannot write {out}: folder {folder} does not exist")
+    if out.is_dir():
+        raise MeshError(f"-o/--output {out}: is a folder")
+    check_folder(out.parent, f"-o/--output {out}")   # exists and takes a file (read-only, /proc: refused)
 
 
 def _size(n: int) -> str:
@@ -143,7 +143,7 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Stand-alone entry (``python -m paramlod.app.mesh_cmd ...``)."""
-    parser = argparse.ArgumentParser(prog="paramlod")
+    parser = Parser(prog="paramlod")
     add_subparser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
     return run_reporting_errors(lambda: args.func(args))

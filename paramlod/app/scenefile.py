@@ -1,10 +1,13 @@
 """TOML scene files: objects, camera and render settings, validated with messages that name the
 field and its line. Format: docs/scene-format.md. Driven by ``paramlod render`` and the gallery.
-Scene files are data: the only code they name is an instance builder (an importable module:function)."""
+Scene files are data: the only code they name is an instance builder, and that must be one a loaded
+function or plugin registered (paramlod.function.registry.register_builder), unless the user trusts
+the scene (``--trust-scene`` or PARAMLOD_TRUST_SCENE=1), which lets it import any module:function."""
 from __future__ import annotations
 
 import importlib
 import math
+import os
 import re
 import tomllib
 from dataclasses import dataclass
@@ -16,7 +19,8 @@ from paramlod import dmri, meshlod  # noqa: F401  (meshlod registers the "mesh" 
 from paramlod.app.args import MAX_SIDE
 from paramlod.core.camera import Camera
 from paramlod.core.transforms import matrix as as_matrix, rotate, scale, translate
-from paramlod.errors import MeshError, ParamlodError, SceneError
+from paramlod.errors import FunctionError, MeshError, ParamlodError, SceneError
+from paramlod.function import registry
 from paramlod.lod.stage import LodSettings
 from paramlod.pipeline.settings import RenderSettings
 from paramlod.renderers.registry import KINDS, variants
@@ -36,6 +40,11 @@ OBJECT_KEYS = {"function", "params", "color", "specular", "translate", "rotate",
 SOURCE_KEYS = ("function", "mesh", "surfels", "sh_field")   # what an object is made of: one of them
 MESH_LODS = ("dag", "full", "chain")
 ANIMATION_KEYS = {"frames", "t0", "t1", "fps"}
+TRUST_ENV = "PARAMLOD_TRUST_SCENE"   # "1": scene files may import and run any module:function (a builder)
+
+
+def trusted() -> bool:
+    return os.environ.get(TRUST_ENV, "") == "1"
 
 
 @dataclass
@@ -105,7 +114,7 @@ class _Checker:
             return default
         v = d[key]
         kind = int if integer else (int, float)
-        if not isinstance(v, kind) or isinstance(v, bool) or (lo is not None and v < lo) or (hi is not None and v > hi):
+        if not isinstance(v, kind) or isinstance(v, bool) or not math.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
             rng = f" in [{lo}, {hi}]" if lo is not None else ""
             self.fail(f"{where}.{key}", f"must be {'an integer' if integer else 'a number'}{rng}, got {v!r}", table, index, key)
         return v
@@ -132,8 +141,11 @@ def load_scene(path, size=None) -> SceneFile:
     if not isinstance(cam_d, dict):
         ck.fail("camera", "must be a table [camera]", "camera")
     ck.unknown(cam_d, CAMERA_KEYS, "camera", "camera")
-    size = list(size) if size is not None else cam_d.get("size", [960, 540])
-    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(x, int) and 0 < x <= MAX_SIDE for x in size)):
+    override = size is not None
+    size = list(size) if override else cam_d.get("size", [960, 540])
+    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(x, int) and not isinstance(x, bool) and 0 < x <= MAX_SIDE for x in size)):
+        if override:   # the command's --size, not the file's field
+            raise SceneError(f"--size: must be WxH with each side 1..{MAX_SIDE}, got {size!r}")
         ck.fail("camera.size", f"must be [width, height] in pixels, got {size!r}", "camera", None, "size")
     r = data.get("render", {})
     if not isinstance(r, dict):
@@ -144,12 +156,12 @@ def load_scene(path, size=None) -> SceneFile:
     if variant not in variants():   # the frame's variant: for the objects of its kind
         ck.fail("render.variant", f"unknown variant {variant!r} (available: {', '.join(variants())})", "render", None, "variant")
     th = r.get("threshold", 84.0)
-    if isinstance(th, (int, float)) and not isinstance(th, bool):
+    if _number(th):
         th = [th, th]
-    if not (isinstance(th, list) and len(th) == 2 and all(isinstance(x, (int, float)) and x > 0 for x in th)):
+    if not (isinstance(th, list) and len(th) == 2 and all(_number(x) and x > 0 for x in th)):
         ck.fail("render.threshold", f"must be a positive number of pixels or [t_u, t_v], got {r.get('threshold')!r}", "render", None, "threshold")
     grid = r.get("initial_grid", [1, 1])
-    if not (isinstance(grid, list) and len(grid) == 2 and all(isinstance(x, int) and 1 <= x <= 64 for x in grid)):
+    if not (isinstance(grid, list) and len(grid) == 2 and all(_number(x) and isinstance(x, int) and 1 <= x <= 64 for x in grid)):
         ck.fail("render.initial_grid", f"must be [gu, gv] with integers in 1..64, got {grid!r}", "render", None, "initial_grid")
     settings = RenderSettings(
         lod=LodSettings(threshold=(float(th[0]), float(th[1])),
@@ -187,6 +199,10 @@ def load_scene(path, size=None) -> SceneFile:
         params = o.get("params", {})
         if not isinstance(params, dict):
             ck.fail(f"{where}.params", "must be a table of name = value", "objects", i, "params")
+        for name, value in params.items():   # numbers only: TOML's true would pass as 1
+            if not _is_param_value(value):
+                ck.fail(f"{where}.params.{name}", f"must be a number or a list of numbers, got {value!r}",
+                        "objects", i, "params")
         if "mesh" in o:
             _check_mesh_keys(o, ck, where, i)
         elif "lod" in o:
@@ -225,8 +241,8 @@ def load_scene(path, size=None) -> SceneFile:
             if str(exc).startswith(str(path)):
                 raise
             ck.fail(where, str(exc), "objects", i)
-        except ParamlodError as exc:
-            key = "params" if "parameter" in str(exc) else "function"
+        except ParamlodError as exc:   # named after what the object is made of, not always "function"
+            key = "params" if "parameter" in str(exc) else (sources[0] if sources else "function")
             ck.fail(f"{where}.{key}", str(exc), "objects", i, key)
     camera = _camera(cam_d, size, scene, ck)
     mesh_default = KINDS["mesh"].variant_for(variant) if "mesh" in KINDS else "meshlets"   # what draws a mesh here
@@ -235,7 +251,9 @@ def load_scene(path, size=None) -> SceneFile:
     if mixed is None and any("variant" in o for o in objects):
         variant = per[0]
     try:   # `aa` holds for the point variant too, which supersamples only
-        settings.apply_aa(settings.tess.aa, points_only=mixed is None and variant == "points")
+        # the frame's variant is named only when the file sets aa (a points-ssaa file without aa keeps its ss)
+        settings.apply_aa(settings.tess.aa, points_only=mixed is None and variant == "points",
+                          variant=variant if mixed is None and "aa" in r else None)
     except SceneError as exc:
         ck.fail("render.aa", str(exc), "render", None, "aa")
     meta = data.get("meta", {})
@@ -274,6 +292,28 @@ def _camera(cam_d: dict, size, scene, ck: _Checker) -> Camera:
         if str(exc).startswith(str(ck.path)):
             raise
         ck.fail("camera", str(exc).removeprefix("camera: "), "camera")
+
+
+def _number(x) -> bool:
+    """A finite TOML number; not a boolean (Python's True is an int, TOML's true is no number)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _is_param_value(v) -> bool:
+    return _number(v) or (isinstance(v, list) and all(_number(x) for x in v))
+
+
+def _builder(spec):
+    """The callable a scene file names as ``builder``: a registered one; any importable
+    ``module:function`` only when the scene is trusted (that runs code the file names)."""
+    if not isinstance(spec, str):
+        raise SceneError(f"a builder is named by a string, got {spec!r}")
+    try:
+        return registry.get_builder(spec)
+    except FunctionError as exc:
+        if not trusted():
+            raise SceneError(str(exc)) from None
+    return _import(spec)
 
 
 def _import(spec: str):
@@ -319,7 +359,7 @@ def _instances(o, ck, where, i, allowed: set) -> dict:
     if not isinstance(spec.get("args", {}), dict):
         ck.fail(f"{where}.instances", "args must be a table of name = value", "objects", i, "instances")
     try:
-        builder = _import(spec["builder"])
+        builder = _builder(spec["builder"])
     except SceneError as exc:
         ck.fail(f"{where}.instances", str(exc), "objects", i, "instances")
     try:
@@ -390,6 +430,13 @@ def _add_surfels(scene, spec, path, m, mat, ck, where, i, has_color=False):
         if isinstance(b, bool) or not isinstance(b, (int, float)) or not math.isfinite(b) or b <= 0:
             ck.fail(f"{where}.surfels.blend", f"must be a number > 0 (e.g. 0.5: the mesh has taken over when the "
                     f"surfel law asks for 1.5 times the set), got {b!r}", "objects", i, "surfels")
+    _check_file(path, spec["path"], ck, f"{where}.surfels.path", i, "surfels")
+    def bad(v):
+        return isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+    if "px" in spec and (bad(spec["px"]) or spec["px"] <= 0):
+        ck.fail(f"{where}.surfels.px", f"must be a number of pixels > 0, got {spec['px']!r}", "objects", i, "surfels")
+    if "count" in spec and (bad(spec["count"]) or not isinstance(spec["count"], int) or spec["count"] < 1):
+        ck.fail(f"{where}.surfels.count", f"must be an integer >= 1, got {spec['count']!r}", "objects", i, "surfels")
     strategy = FixedCount(int(spec["count"])) if "count" in spec else FixedSize(float(spec.get("px", 2.0)))
     try:
         scene.add_surfels((path.parent / spec["path"]).resolve(), transform=m, strategy=strategy,
@@ -406,6 +453,7 @@ def _add_sh_field(scene, spec, path, m, mat, ck, where, i):
     if not isinstance(spec, dict) or "path" not in spec:
         ck.fail(f"{where}.sh_field", 'must be { path = "field.npz" or "sh.nii.gz", ... }', "objects", i, "sh_field")
     spec = dict(spec)
+    _check_file(path, spec["path"], ck, f"{where}.sh_field.path", i, "sh_field")
     file = (path.parent / spec.pop("path")).resolve()
     load_keys = {"basis", "legacy", "stride"}
     load = {k: spec.pop(k) for k in list(spec) if k in load_keys}
@@ -419,6 +467,16 @@ def _add_sh_field(scene, spec, path, m, mat, ck, where, i):
         ck.fail(f"{where}.sh_field", str(exc), "objects", i, "sh_field")
 
 
+def _check_file(scene_path: Path, name, ck, where: str, i: int, key: str) -> None:
+    """A data file an object names exists, reported under the field that names it."""
+    if not isinstance(name, str) or not name.strip():
+        ck.fail(where, f"must be a file name (relative to the scene file), got {name!r}", "objects", i, key)
+    file = (scene_path.parent / name).resolve()
+    if not file.is_file():
+        ck.fail(where, f"file {file} does not exist" if not file.exists() else f"{file} is not a file",
+                "objects", i, key)
+
+
 def _tess_settings(r: dict, ck: _Checker):
     ts = TessSettings()
     if "aa" in r:
@@ -426,7 +484,7 @@ def _tess_settings(r: dict, ck: _Checker):
     levels = r.get("levels", "adaptive")
     if levels == "adaptive":
         ts.mode = "adaptive"
-    elif isinstance(levels, list) and len(levels) == 2 and all(isinstance(x, (int, float)) for x in levels):
+    elif isinstance(levels, list) and len(levels) == 2 and all(_number(x) for x in levels):
         ts.mode, ts.levels = "fixed", (float(levels[0]), float(levels[1]))
     else:
         ck.fail("render.levels", f'must be "adaptive" or [inner, outer], got {levels!r}', "render", None, "levels")
@@ -459,14 +517,14 @@ def _transform(o, ck: _Checker, where, i) -> np.ndarray:
         m = m @ translate(ck.vec(o, "translate", 3, where, "objects", i))
     if "rotate" in o:
         rot = o["rotate"]
-        ok = (isinstance(rot, list) and len(rot) == 2 and isinstance(rot[0], (int, float))
-              and isinstance(rot[1], list) and len(rot[1]) == 3)
+        ok = (isinstance(rot, list) and len(rot) == 2 and _number(rot[0])
+              and isinstance(rot[1], list) and len(rot[1]) == 3 and all(_number(x) for x in rot[1]))
         if not ok:
             ck.fail(f"{where}.rotate", f"must be [angle_degrees, [x, y, z]], got {rot!r}", "objects", i, "rotate")
         m = m @ rotate(rot[0], rot[1])
     if "scale" in o:
         s = o["scale"]
-        if isinstance(s, (int, float)) and not isinstance(s, bool) and s > 0:
+        if _number(s) and s > 0:
             m = m @ scale(s)
         else:
             m = m @ scale(*ck.vec(o, "scale", 3, where, "objects", i))

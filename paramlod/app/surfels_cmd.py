@@ -17,10 +17,13 @@ from paramlod.core.camera import Camera
 from paramlod.errors import SurfelError
 from paramlod.surfels.build.sampler import sample
 from paramlod.surfels.format import SurfelSet
-from paramlod.surfels.render import FixedCount, FixedSize, default_camera, render_surfels
+from paramlod.surfels.render import FixedCount, FixedSize, default_camera, render_surfels, up_axis
 
 
-def _check_output_folder(path: Path):
+def _check_output(path: Path):
+    # the output is a .surfels file (an npz named x.png would pass for an image) in a folder that exists
+    if path.suffix.lower() != ".surfels":
+        raise SurfelError(f"-o {path}: the output of surfels sample must end with .surfels")
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise SurfelError(f"cannot write {path}: folder {folder} does not exist")
@@ -30,7 +33,7 @@ def cmd_sample(args) -> int:
     if len(args.source) > 1 or dist.job_requested(args):
         return cmd_sample_job(args)
     out = Path(args.output)
-    _check_output_folder(out)  # fail before the sampling, not after it
+    _check_output(out)  # fail before the sampling, not after it
     s = sample(args.source[0], args.count, views=args.views, resolution=args.resolution, seed=args.seed,
                progress=not args.quiet)
     s.save(out)
@@ -90,9 +93,13 @@ def cmd_sample_job(args) -> int:
 
 
 def _camera(args, surfels):
+    if args.up is not None and not np.linalg.norm(args.up) > 0:
+        raise SurfelError(f"--up {','.join(f'{x:g}' for x in args.up)}: must be a non-zero vector")
+    # without --up, the set's own up axis (up_axis: the face it rests on), so a z-up scan stands upright
+    up = np.asarray(args.up, np.float64) if args.up is not None else up_axis(surfels)
     if args.eye is None:
-        cam = default_camera(surfels, args.size, fov_y=args.fov)
-        if args.target is None and args.up is None:
+        cam = default_camera(surfels, args.size, fov_y=args.fov, up=up)
+        if args.target is None:
             return cam
         eye = cam.eye
     else:
@@ -101,7 +108,7 @@ def _camera(args, surfels):
     target = np.asarray(args.target) if args.target is not None else c
     dist = float(np.linalg.norm(eye - target))
     near = max(dist - 2 * r, dist * 1e-3) if dist > 2 * r else max(r * 1e-3, 1e-4)
-    return Camera.look_at(eye, target, up=args.up or (0, 1, 0), fov_y=args.fov, size=args.size,
+    return Camera.look_at(eye, target, up=up, fov_y=args.fov, size=args.size,
                           near=near, far=dist + 2 * r)
 
 
@@ -175,7 +182,8 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
     add_output(r)
     r.add_argument("--eye", type=parse_vec3, help="camera position x,y,z (default: a 3/4 view framing the set)")
     r.add_argument("--target", type=parse_vec3, help="camera target x,y,z (default: the set's centre)")
-    r.add_argument("--up", type=parse_vec3, help="camera up vector (default 0,1,0)")
+    r.add_argument("--up", type=parse_vec3, help="camera up vector (default: the set's up axis, opposite the flat base "
+                                                   "it rests on, else 0,1,0; the view is a 3/4 view of its widest side)")
     r.add_argument("--fov", type=float, default=35.0, help="vertical field of view in degrees (default 35)")
     add_stats(r)
     r.set_defaults(func=cmd_render)

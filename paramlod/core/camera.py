@@ -7,25 +7,85 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from paramlod.core.transforms import PLACE_LIMIT, check_values
 from paramlod.errors import SceneError
+
+
+MAX_SIZE = 16384
+
+
+def _pixels(size) -> tuple[int, int]:
+    """(width, height) as whole pixels in 1..MAX_SIZE; 10.5 is refused, not rounded."""
+    try:
+        w, h = size
+    except (TypeError, ValueError):
+        raise SceneError(f"camera: size must be (width, height) in pixels, got {size!r}") from None
+    out = []
+    for x in (w, h):
+        if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(x) or float(x) != int(x):
+            raise SceneError(f"camera: size must be whole pixels, got {w!r}x{h!r}")
+        out.append(int(x))
+    if not all(1 <= x <= MAX_SIZE for x in out):
+        raise SceneError(f"camera: size must be between 1x1 and {MAX_SIZE}x{MAX_SIZE}, got {out[0]}x{out[1]}")
+    return out[0], out[1]
+
+
+def _number(x, what: str) -> float:
+    if isinstance(x, (bool, np.bool_)):
+        raise SceneError(f"camera: {what} must be a number, got {x!r}")
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise SceneError(f"camera: {what} must be a number, got {x!r}") from None
+    if not np.isfinite(v):
+        raise SceneError(f"camera: {what} must be finite, got {v}")
+    return v
 
 
 @dataclass
 class Camera:
+    """Checked when made (``look_at``, the constructor, ``with_size``): a camera with a NaN or
+    far-off eye made every LOD patch measure infinite and split at every step."""
+
     view: np.ndarray        # 4x4 world -> view
     fov_y: float            # degrees
     size: tuple[int, int]   # (width, height) in pixels
     near: float = 0.01
     far: float = 1000.0
 
+    def __post_init__(self):
+        try:
+            view = np.array(self.view, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SceneError("camera: view must be a 4x4 matrix of numbers") from None
+        if view.shape != (4, 4):
+            raise SceneError(f"camera: view must be a 4x4 matrix, got shape {view.shape}")
+        self.view = check_values(view, "camera: view")
+        self.size = _pixels(self.size)
+        self.fov_y = _number(self.fov_y, "fov_y")
+        if not 0 < self.fov_y < 180:
+            raise SceneError(f"camera: fov_y must be in (0, 180) degrees, got {self.fov_y}")
+        self.near, self.far = _number(self.near, "near"), _number(self.far, "far")
+        if not 0 < self.near < self.far:
+            raise SceneError(f"camera: need 0 < near < far, got near={self.near}, far={self.far}")
+        if self.far > PLACE_LIMIT:
+            raise SceneError(f"camera: far must be at most {PLACE_LIMIT:.0e}, got {self.far:.3g}")
+
     @classmethod
     def look_at(cls, eye, target, up=(0, 1, 0), fov_y=45.0, size=(640, 480), near=0.01, far=1000.0):
-        eye, target, up = (np.asarray(x, dtype=np.float64).reshape(3) for x in (eye, target, up))
+        eye, target, up = (check_values(x, f"camera: {n}").reshape(-1)
+                           for x, n in ((eye, "eye"), (target, "target"), (up, "up")))
+        for x, n in ((eye, "eye"), (target, "target"), (up, "up")):
+            if x.shape != (3,):
+                raise SceneError(f"camera: {n} must be three numbers, got {x.size}")
         f = target - eye
         if np.linalg.norm(f) == 0:
             raise SceneError("camera: eye and target are the same point")
         f /= np.linalg.norm(f)
-        s = np.cross(f, up)
+        if np.linalg.norm(up) == 0:
+            raise SceneError("camera: 'up' must not be zero")
+        s = np.cross(f, up / np.linalg.norm(up))
         if np.linalg.norm(s) < 1e-9:
             raise SceneError("camera: 'up' is parallel to the viewing direction; choose another up vector")
         s /= np.linalg.norm(s)
@@ -33,14 +93,7 @@ class Camera:
         view = np.eye(4)
         view[0, :3], view[1, :3], view[2, :3] = s, u, -f
         view[:3, 3] = -view[:3, :3] @ eye
-        w, h = (int(x) for x in size)
-        if w <= 0 or h <= 0 or w > 16384 or h > 16384:
-            raise SceneError(f"camera: size must be between 1x1 and 16384x16384, got {w}x{h}")
-        if not 0 < fov_y < 180:
-            raise SceneError(f"camera: fov_y must be in (0, 180) degrees, got {fov_y}")
-        if not 0 < near < far:
-            raise SceneError(f"camera: need 0 < near < far, got near={near}, far={far}")
-        return cls(view, float(fov_y), (w, h), float(near), float(far))
+        return cls(view, fov_y, size, near, far)
 
     @property
     def width(self) -> int:
@@ -69,7 +122,7 @@ class Camera:
 
     def with_size(self, size) -> "Camera":
         """The same view at another image size (the aspect ratio follows)."""
-        return Camera(self.view.copy(), self.fov_y, (int(size[0]), int(size[1])), self.near, self.far)
+        return Camera(self.view.copy(), self.fov_y, size, self.near, self.far)   # checked as any camera
 
 
 # --- camera and geometry facts shared by the surfel prefix law and the surfel -> mesh hand-off ---------

@@ -1,9 +1,48 @@
-"""4x4 transform helpers (column vectors: p' = M @ p). Compose with ``@``."""
+"""4x4 transform helpers (column vectors: p' = M @ p). Compose with ``@``.
+
+Every helper checks its numbers: finite and at most ``PLACE_LIMIT`` in magnitude. The kernels
+place points in float32; far beyond that an object collapses to a point or its patches measure
+NaN (an object at 1e20 made the LOD stage split every patch at every step)."""
 from __future__ import annotations
 
 import numpy as np
 
 from paramlod.errors import SceneError
+
+PLACE_LIMIT = 1e15   # largest |coordinate| / |scale| a transform or camera may hold
+MIN_SCALE = 1e-15    # smallest |scale| of a transform's 3x3 part (its determinant's cube root)
+
+
+def check_values(values, what: str) -> np.ndarray:
+    """``values`` as float64, refused (SceneError naming ``what``) unless finite and within
+    PLACE_LIMIT."""
+    try:
+        a = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{what} must be numbers, got {values!r}") from None
+    if not np.all(np.isfinite(a)):
+        raise SceneError(f"{what} must be finite, got {np.array2string(a.ravel(), precision=6)}")
+    big = float(np.abs(a).max(initial=0.0))
+    if big > PLACE_LIMIT:
+        raise SceneError(f"{what} has a value of magnitude {big:.3g}, beyond {PLACE_LIMIT:.0e}: float32 "
+                         "cannot place geometry there (move the object or the camera nearer the origin)")
+    return a
+
+
+def check_transform(m, what: str = "a transform") -> np.ndarray:
+    """A finite, invertible 4x4 (or [n, 4, 4]) matrix within PLACE_LIMIT, else a SceneError
+    naming ``what``."""
+    a = check_values(m, what)
+    if a.shape[-2:] != (4, 4):
+        raise SceneError(f"{what} must be a 4x4 matrix, got shape {a.shape}")
+    det = np.abs(np.linalg.det(a[..., :3, :3]))
+    # a uniform scale s has det s^3: 1e-45 is a scale of 1e-15
+    bad = np.flatnonzero(np.atleast_1d(det < MIN_SCALE ** 3))
+    if bad.size:
+        which = what if a.ndim == 2 else f"{what} [{int(bad[0])}]"
+        raise SceneError(f"{which} must be invertible with a scale above {MIN_SCALE:.0e} "
+                         f"(its 3x3 part has determinant {float(np.atleast_1d(det)[bad[0]]):.3g})")
+    return a
 
 
 def identity() -> np.ndarray:
@@ -11,7 +50,9 @@ def identity() -> np.ndarray:
 
 
 def translate(x, y=None, z=None) -> np.ndarray:
-    t = np.asarray([x, y, z] if y is not None else x, dtype=np.float64).reshape(3)
+    t = check_values([x, y, z] if y is not None else x, "translate").reshape(-1)
+    if t.shape != (3,):
+        raise SceneError(f"translate needs three numbers, got {t.size}")
     m = np.eye(4)
     m[:3, 3] = t
     return m
@@ -19,20 +60,23 @@ def translate(x, y=None, z=None) -> np.ndarray:
 
 def scale(sx, sy=None, sz=None) -> np.ndarray:
     if sy is None and np.ndim(sx) == 0:
-        s = np.array([sx, sx, sx], dtype=np.float64)
+        s = check_values([sx, sx, sx], "scale")
     else:
-        s = np.asarray([sx, sy, sz] if sy is not None else sx, dtype=np.float64).reshape(3)
+        s = check_values([sx, sy, sz] if sy is not None else sx, "scale").reshape(-1)
+        if s.shape != (3,):
+            raise SceneError(f"scale needs one or three numbers, got {s.size}")
     return np.diag([*s, 1.0])
 
 
 def rotate(angle_deg: float, axis=(0, 0, 1)) -> np.ndarray:
     """Rotation by ``angle_deg`` degrees about ``axis`` (right-handed)."""
-    a = np.asarray(axis, dtype=np.float64)
+    a = check_values(axis, "rotate axis").reshape(-1)
+    t = float(check_values(angle_deg, "rotate angle"))
     n = np.linalg.norm(a)
-    if n == 0:
-        raise SceneError("rotate: the axis must not be zero")
+    if a.shape != (3,) or n == 0:
+        raise SceneError("rotate: the axis must be three numbers, not zero")
     x, y, z = a / n
-    t = np.radians(angle_deg)
+    t = np.radians(t)
     c, s, C = np.cos(t), np.sin(t), 1 - np.cos(t)
     m = np.eye(4)
     m[:3, :3] = [[c + x * x * C, x * y * C - z * s, x * z * C + y * s],
@@ -41,11 +85,9 @@ def rotate(angle_deg: float, axis=(0, 0, 1)) -> np.ndarray:
     return m
 
 
-def matrix(m) -> np.ndarray:
-    """A 4x4 matrix from nested lists (rows), checked."""
-    a = np.asarray(m, dtype=np.float64)
-    if a.shape != (4, 4) or not np.all(np.isfinite(a)):
-        raise SceneError(f"a transform must be a finite 4x4 matrix, got shape {a.shape}")
-    if abs(np.linalg.det(a[:3, :3])) < 1e-12:
-        raise SceneError("a transform must be invertible (its 3x3 part has determinant 0)")
+def matrix(m, what: str = "a transform") -> np.ndarray:
+    """A 4x4 matrix from nested lists (rows), checked (``check_transform``)."""
+    a = check_transform(m, what)
+    if a.shape != (4, 4):
+        raise SceneError(f"{what} must be a finite 4x4 matrix, got shape {a.shape}")
     return a

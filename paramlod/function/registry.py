@@ -6,6 +6,11 @@ the ``paramlod.functions`` entry points of installed distributions, and plugin f
 Two functions with one name are an error that names both sources. A ParametricFunction object
 passes through ``get_function`` unchanged. Loading (and the compile check of plugins) happens once
 per source; ``refresh()`` forgets everything loaded from plugins.
+
+Instance builders (what a scene file's ``instances = { builder = "..." }`` names) are registered
+here too, by name: ``register_builder(name, fn)``, or a built-in module's ``BUILDERS = {"f": f}``
+(registered as ``"paramlod.functions.<module>:f"``). A scene file is data: it may name only a
+registered builder (``get_builder``), never an arbitrary importable callable.
 """
 from __future__ import annotations
 
@@ -27,6 +32,7 @@ BUILTIN_PACKAGE = "paramlod.functions"   # the built-in plugins: loaded as data,
 _plugin_paths: list[Path] = []                          # from add_plugin_path, in call order
 _folder_cache: dict[Path, list[ParametricFunction]] = {}
 _entry_point_cache: dict[tuple, list[ParametricFunction]] = {}
+_builders: dict[str, object] = {}                       # name -> callable returning instance arrays
 
 
 @lru_cache(maxsize=1)
@@ -39,6 +45,10 @@ def builtin_functions() -> dict[str, ParametricFunction]:
         if info.name.startswith("_"):
             continue
         module = importlib.import_module(f"{pkg.__name__}.{info.name}")
+        # built-in plugins may not import this room (tests/test_layers.py): they declare their
+        # builders as data, registered here under "module:name"
+        for key, fn in getattr(module, "BUILDERS", {}).items():
+            register_builder(f"{module.__name__}:{key}", fn)
         for key, obj in vars(module).items():
             if isinstance(obj, ParametricFunction) and not key.startswith("_"):
                 if obj.name in found and found[obj.name] is not obj:
@@ -133,6 +143,38 @@ def all_functions() -> dict[str, ParametricFunction]:
                     f"{_describe_source(f)}; rename one of them (name='...' in @parametric)")
             merged[f.name] = f
     return merged
+
+
+def register_builder(name: str, fn) -> None:
+    """Make ``fn`` (a callable returning instance arrays: count, transforms, ...) nameable from scene
+    files as ``instances = { builder = name, args = {...} }``. A name registered twice with another
+    callable is an error."""
+    if not isinstance(name, str) or not name.strip():
+        raise FunctionError(f"a builder name is a non-empty string, got {name!r}")
+    if not callable(fn):
+        raise FunctionError(f"builder {name!r}: expected a callable, got {fn!r}")
+    other = _builders.get(name)
+    if other is not None and other is not fn:
+        raise FunctionError(f"two builders are named {name!r}: {other!r} and {fn!r}")
+    _builders[name] = fn
+
+
+def builders() -> dict[str, object]:
+    """Every registered instance builder by name (built-ins and those of loaded plugins)."""
+    all_functions()   # loading the functions runs their modules, which register their builders
+    return dict(_builders)
+
+
+def get_builder(name: str):
+    """The registered builder ``name``; FunctionError (listing the registered ones) otherwise."""
+    known = builders()
+    if name in known:
+        return known[name]
+    close = difflib.get_close_matches(str(name), known, n=3)
+    hint = f"; did you mean {', '.join(close)}?" if close else ""
+    raise FunctionError(f"builder {name!r} is not registered (registered: {', '.join(sorted(known)) or 'none'})"
+                        f"{hint}; a scene file names only registered builders, or pass --trust-scene "
+                        "to let it import and run any module:function")
 
 
 def get_function(fn_or_name) -> ParametricFunction:

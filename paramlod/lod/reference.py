@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, FLAG_FORCED, initial_patches
+from paramlod.lod.stage import check_budget
 
 F = np.float32
 
@@ -138,7 +139,7 @@ def run_lod(scene, cam_record, settings, functions=None):
     functions = functions or scene.functions()
     inst = scene.instance_buffers()
     patches = initial_patches(inst[0][:, 28:32], settings.initial_grid)
-    out, steps = [], []
+    out, steps, made = [], [], 0
     for step in range(1, settings.max_steps + 1):
         if len(patches) == 0:
             steps.append({"step": step, "in": 0, "split": 0, "culled": 0, "out": 0, "forced": 0})
@@ -148,4 +149,6 @@ def run_lod(scene, cam_record, settings, functions=None):
                                    step == settings.max_steps)
         out.append(rp)
         steps.append(st)
+        made += len(patches)
+        check_budget(made, settings)   # as the device stage: splitting stops at the budget
     return (np.concatenate(out) if out else np.zeros(0, RENDER_DTYPE)), steps

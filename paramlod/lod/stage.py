@@ -2,7 +2,10 @@
 in OpenCL (kernels/lod.cl), producing the render list for the renderers.
 
 Buffers grow when a step overflows them (the stage is redone), up to ``max_patches``; past that
-the stage stops with an error that names the limit. Nothing is dropped silently.
+the stage stops with an error that names the limit. Nothing is dropped silently. ``patch_budget``
+bounds the patches splitting makes in one frame: a view where every patch splits at every step
+(a camera at a surface, geometry past float32's reach) would otherwise make 4^(max_steps-1)
+patches, grown into by redone stages for minutes, and stops with a CapacityError instead.
 """
 from __future__ import annotations
 
@@ -26,6 +29,9 @@ class LodSettings:
     max_steps: int = 12
     initial_grid: tuple[int, int] = (1, 1)
     max_patches: int = 1 << 24   # per buffer (eval ping-pong and render list)
+    # patches made by splitting in one frame, all steps together (a 1080p frame of a detailed
+    # scene makes thousands; a view where everything splits makes millions)
+    patch_budget: int = 1 << 21
 
     def validate(self):
         tu, tv = self.threshold
@@ -36,6 +42,10 @@ class LodSettings:
         gu, gv = self.initial_grid
         if not (1 <= gu <= 64 and 1 <= gv <= 64):
             raise SceneError(f"lod initial_grid must be in 1..64 per axis, got {self.initial_grid}")
+        for name in ("max_patches", "patch_budget"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 1 << 31:
+                raise SceneError(f"lod {name} must be an integer in 1..2^31, got {v!r}")
 
 
 class _Buffer:
@@ -169,6 +179,9 @@ class LodStage:
         n = self._steps_n
         need = int(counts[1:n + 1, C_CHILDREN].max(initial=0))
         n_render = int(counts[0, LOD_RENDER_TOTAL])
+        # children counted past a full buffer still count, so a runaway stage is stopped after
+        # a few redone stages of growing buffers, not after it has made all its patches
+        check_budget(int(counts[1:n + 1, C_CHILDREN].sum(dtype=np.int64)), settings)
         grew = False
         if n < self._max_steps and counts[n, C_CHILDREN]:
             self._depth.pop(self._depth_key)   # too few steps: the next stage runs all of them
@@ -217,3 +230,13 @@ class LodStage:
             cl.enqueue_copy(cl_device().queue, out, self.render.buf)
         return out
 
+
+def check_budget(made: int, settings: LodSettings) -> None:
+    """CapacityError when splitting made more than ``settings.patch_budget`` patches this frame
+    (shared with the numpy twin)."""
+    if made > settings.patch_budget:
+        raise CapacityError(
+            f"the LOD stage made {made} patches by splitting in one frame, more than patch_budget="
+            f"{settings.patch_budget}: every patch keeps splitting, as it does when the camera sits on a "
+            "surface or an object is too far or too large for float32 to place; check the camera and the "
+            "transforms, or raise [lod] patch_budget, raise the threshold or lower max_steps")

@@ -8,7 +8,9 @@ import time
 import weakref
 from dataclasses import replace
 
-from paramlod.core.camera import Camera
+import numpy as np
+
+from paramlod.core.camera import Camera, pixel_world_size
 from paramlod.core.frame import FrameStats
 from paramlod.device.context import cl_device
 from paramlod.errors import SceneError
@@ -17,6 +19,8 @@ from paramlod.pipeline.passes import SceneState
 from paramlod.pipeline.plan import check_variant
 from paramlod.pipeline.settings import RenderSettings
 from paramlod.scene.scene import Scene
+
+FLOAT32_EPS = float(np.finfo(np.float32).eps)
 
 
 class Pipeline:
@@ -35,9 +39,9 @@ class Pipeline:
                settings: RenderSettings | None = None, time_: float | None = None):
         """A Frame of ``scene`` seen by ``camera``; see ``paramlod.render``."""
         frames = self.passes(scene, camera, variant, settings, time_)
-        if len(frames) == 1:
-            return frames[0]
-        return composite(frames, background=scene.background)
+        frame = frames[0] if len(frames) == 1 else composite(frames, background=scene.background)
+        note_nothing_drawn(frame, frames, camera)
+        return frame
 
     def render_on_device(self, scene: Scene, camera: Camera, variant: str | None = None,
                          settings: RenderSettings | None = None) -> FrameStats:
@@ -131,6 +135,36 @@ class Pipeline:
         return frame
 
 
+def note_nothing_drawn(frame, frames, camera) -> None:
+    """``stats["nothing_drawn"]``: None, or why a frame covers no pixel (also in ``warnings``), so
+    an empty image is never taken for a render (objects at 1e10 gave one with exit code 0)."""
+    stats = frame.stats
+    reason = None
+    if not int(stats.get("pixels_written", 0)):
+        parts = [f.stats for f in frames]
+        patches = sum(int(p.get("render_patches", 0)) for p in parts)
+        culled = sum(int(s.get("culled", 0)) for p in parts for s in p.get("lod_steps") or [])
+        # the kernels place points in float32: far from the origin its steps outgrow a pixel
+        far_off = float(np.linalg.norm(camera.eye))
+        depth = float(np.sqrt(camera.near * camera.far))   # a depth between near and far
+        step, pixel = far_off * FLOAT32_EPS, pixel_world_size(camera, depth)
+        if step > pixel:
+            reason = (f"nothing drawn: the camera is {far_off:.3g} from the origin, where float32's steps "
+                      f"({step:.3g}) are larger than a pixel at depth {depth:.3g} ({pixel:.3g}); move the scene "
+                      "and the camera nearer the origin")
+        elif patches == 0 and culled:
+            reason = (f"nothing drawn: the LOD stage culled every patch ({culled}), every object lies outside "
+                      "the camera's view (check the camera's eye, target, near and far)")
+        elif patches:
+            reason = (f"nothing drawn: {patches} patches reached the renderer but none covered a pixel; the "
+                      "objects are too far, too small or too far from the origin for float32 to place")
+        else:
+            reason = ("nothing drawn: no object covered a pixel; every object is outside the camera's view, "
+                      "too far or too small")
+        stats["warnings"] = [*stats.get("warnings", []), reason]
+    stats["nothing_drawn"] = reason
+
+
 def _keys_stats(parts: list[dict], names: list[str]) -> dict:
     """The stats of the renderers of one keys pass merged: counters added, LOD steps of the first."""
     parametric = [n for n in names if n != "surfels"]
@@ -192,4 +226,4 @@ def scene_state(scene: Scene) -> SceneState:
     return PIPELINE.state(scene)
 
 
-__all__ = ["Pipeline", "PIPELINE", "render", "render_on_device", "render_passes", "scene_state"]
+__all__ = ["Pipeline", "PIPELINE", "note_nothing_drawn", "render", "render_on_device", "render_passes", "scene_state"]

@@ -104,3 +104,18 @@ def supersampling_only(mode) -> int:
         raise SceneError(f"anti-aliasing {mode!r}: the points variant supersamples only (4xSS, 9xSS, "
                          f"16xSS); multisampling is a mode of the tess variant")
     return aa.ss
+
+
+# points-ssaa's local framebuffer holds 2x2 or 3x3 subsamples (SsaaSettings.ss)
+LFB_MODES = {"4xSS": 2, "9xSS": 3}
+
+
+def local_framebuffer_ss(mode) -> int:
+    """The subsamples per pixel side the points-ssaa variant draws ``mode`` with (2 for 4xSS, 3 for
+    9xSS); any other mode is a SceneError naming the modes it can do."""
+    aa = parse_aa(mode)
+    if aa.msaa == 1 and aa.ss in LFB_MODES.values():
+        return aa.ss
+    raise SceneError(f"anti-aliasing {aa.name if isinstance(mode, AAMode) else mode!r}: the points-ssaa variant "
+                     f"draws {' or '.join(LFB_MODES)} only (2x2 or 3x3 subsamples in its local framebuffer); "
+                     "use the points variant for noAA or 16xSS and the tess variant for multisampling")

@@ -26,6 +26,7 @@ from paramlod.errors import CapacityError, DeviceError, SceneError
 from paramlod.function.programs import kernel
 from paramlod.lod.stage import LodStage
 from paramlod.lod.uploads import SceneBuffers
+from paramlod.renderers.aa import LFB_MODES, local_framebuffer_ss
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import PointSettings
 from paramlod.renderers.shading import LIGHT
@@ -204,6 +205,15 @@ class LocalFramebufferPoints:
 
     def prepare(self, scene, camera, settings):
         settings.ssaa.validate()
+        aa = getattr(settings, "aa", None)   # the frame's mode (RenderSettings.apply_aa)
+        if aa is not None:
+            # a mode it cannot draw is refused, never drawn as 4xSS; in a frame mixed with tess, a
+            # multisampled mode is tess's, and its supersampling must still be one of points-ssaa's
+            if aa.msaa == 1 or aa.ss not in LFB_MODES.values():
+                local_framebuffer_ss(aa)
+            if aa.ss != settings.ssaa.ss:
+                raise SceneError(f"anti-aliasing {aa.name} asks for {aa.ss}x{aa.ss} subsamples, but "
+                                 f"settings.ssaa.ss is {settings.ssaa.ss}")
         self.dev = self.buffers.upload(scene, camera)
 
     def enqueue(self, target, settings):

@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod.core.camera import Camera
+from paramlod.core.transforms import PLACE_LIMIT
+from paramlod.errors import SceneError
 
 GRID = 24            # samples per side of each probed instance
 MAX_PROBED = 64      # instances sampled per group; the others are bounded through their origins
@@ -56,6 +58,10 @@ def framing_camera(scene, direction=(0.6, 0.45, 1.0), up=(0, 1, 0), fov_y=40.0, 
     """A camera looking at the centre of the scene's box from ``direction``, as close as it can be
     with every corner of the box inside the frame (``margin`` > 1 leaves a border)."""
     lo, hi = scene_box(scene)
+    big = float(np.abs(np.concatenate([lo, hi])).max())
+    if big > PLACE_LIMIT:   # the camera would be refused anyway; say which box made it
+        raise SceneError(f"framing camera: the scene's bounding box reaches {big:.3g}, beyond {PLACE_LIMIT:.0e}, "
+                         "where float32 cannot place geometry (check the transforms and what the functions return)")
     centre = (lo + hi) / 2
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]) - centre
     d = np.asarray(direction, float)

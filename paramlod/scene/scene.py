@@ -29,7 +29,7 @@ from paramlod.scene.loaders import load
 from paramlod.scene.meshes import source_key, source_label
 from paramlod.core.color import srgb_to_linear
 from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
-from paramlod.core.transforms import matrix as _as_matrix
+from paramlod.core.transforms import PLACE_LIMIT, check_transform, check_values, matrix as _as_matrix
 
 # Per-instance float record (paramlod.core.layouts.INSTANCE_F, INST_* in the kernels' prelude):
 # 4x4 model matrix (row-major), 3x4 normal matrix rows, domain (u0, u1, v0, v1).
@@ -101,6 +101,15 @@ class MeshObject:
     aa: str | None = None
     # the SurfelObject this mesh takes over from (count 1, its transform and object id), or None
     handoff: object = field(default=None, repr=False, compare=False)
+
+
+F32_MAX = float(np.finfo(np.float32).max)
+
+
+def _check_placed(m, transforms, who: str) -> None:
+    """The composed model matrices of an object stay within what float32 can place."""
+    if transforms is not None:
+        check_values(m @ transforms, f"{who}: transform @ transforms")
 
 
 def _check_names(variant, aa) -> None:
@@ -175,28 +184,36 @@ class Scene:
             except (TypeError, ValueError):
                 raise FunctionError(f"function '{fn.name}': parameter '{name}' must be a number or a list "
                                     f"of numbers, got {val!r}") from None
+        for name, val in params.items():   # the kernels read parameters as float32
+            if np.any(np.abs(np.asarray(val, dtype=np.float64)) > F32_MAX):
+                raise FunctionError(f"function '{fn.name}': parameter '{name}' is beyond float32's range "
+                                    f"(|value| <= {F32_MAX:.3g}): {val!r}")
         fn.param_block(params)  # validates names, shapes and finiteness of the shared values
         per = {}
         known = {p.name: p for p in fn.params}
         for name, arr in (per_instance or {}).items():
             if name not in known:
                 raise SceneError(f"'{fn.name}' has no parameter '{name}' (its parameters: {', '.join(known) or 'none'})")
-            a = np.asarray(arr, dtype=np.float32)
+            a = np.asarray(arr, dtype=np.float64)
             want = (count,) if not known[name].is_array else (count, known[name].size)
             if a.shape != want:
                 raise SceneError(f"'{fn.name}': per-instance '{name}' must have shape {want}, got {a.shape}")
-            if not np.all(np.isfinite(a)):
-                raise SceneError(f"'{fn.name}': per-instance '{name}' has non-finite values")
+            if not np.all(np.isfinite(a)) or np.any(np.abs(a) > F32_MAX):   # checked before float32 rounds it
+                raise SceneError(f"'{fn.name}': per-instance '{name}' has non-finite values or values beyond "
+                                 f"float32's range (|value| <= {F32_MAX:.3g})")
+            a = a.astype(np.float32)
             per[name] = a
         if transforms is not None:
             transforms = np.asarray(transforms, dtype=np.float64)
-            if transforms.shape != (count, 4, 4) or not np.all(np.isfinite(transforms)):
+            if transforms.shape != (count, 4, 4):
                 raise SceneError(f"'{fn.name}': transforms must be a finite [{count}, 4, 4] array, got {transforms.shape}")
+            transforms = check_transform(transforms, f"'{fn.name}': transforms")
         if colors is not None:
             colors = np.asarray(colors, dtype=np.float32)
             if colors.shape != (count, 3) or not np.all((colors >= 0) & (colors <= 1)):
                 raise SceneError(f"'{fn.name}': colors must be a [{count}, 3] array of values in [0, 1]")
-        m = np.eye(4) if transform is None else _as_matrix(transform)
+        m = np.eye(4) if transform is None else _as_matrix(transform, f"'{fn.name}': transform")
+        _check_placed(m, transforms, f"'{fn.name}'")
         obj = SceneObject(fn, params, m, material or Material(), self.object_count + 1, count, per, transforms,
                           colors, variant, aa)
         self.objects.append(obj)
@@ -243,6 +260,8 @@ class Scene:
             if transforms.shape != (count, 4, 4) or not np.all(np.isfinite(transforms)):
                 raise SceneError(f"mesh '{label}': transforms must be a finite [{count}, 4, 4] array, "
                                  f"got shape {transforms.shape}")
+            transforms = check_values(transforms, f"mesh '{label}': transforms")
+        _check_placed(m, transforms, f"mesh '{label}'")
         models = m[None] if transforms is None else m @ transforms
         det = np.linalg.det(models[:, :3, :3])
         if np.any(np.abs(det) < 1e-20):
@@ -307,7 +326,7 @@ class Scene:
             raise SceneError(f"add_surfels: material must be a paramlod.Material, got {type(material).__name__}")
         if mesh is None and material is not None:
             raise SceneError("add_surfels: material colours the hand-off mesh; give mesh= too (or leave material out)")
-        m = np.eye(4) if transform is None else _as_matrix(transform)
+        m = np.eye(4) if transform is None else _as_matrix(transform, "add_surfels: transform")
         obj = SurfelObject(load("surfels", path_or_set), m, strategy, self.object_count + 1, specular, None, blend)
         if mesh is not None:
             if abs(np.linalg.det(m[:3, :3])) < 1e-20:
@@ -407,6 +426,10 @@ class Scene:
             n = len(models)
             f = np.zeros((n, INST_FLOATS), np.float32)
             f[:, 0:16] = models.reshape(n, 16)
+            if n and float(np.abs(models).max()) > PLACE_LIMIT:   # parts placed on parts can add up
+                k = int(np.argmax(np.abs(models).reshape(n, -1).max(axis=1)))
+                raise SceneError(f"'{fn.name}': instance {k}'s transform places it beyond {PLACE_LIMIT:.0e}, "
+                                 "where float32 cannot place geometry")
             lin = models[:, :3, :3]
             if np.any(np.abs(np.linalg.det(lin)) < 1e-20):
                 raise SceneError(f"'{fn.name}': an instance transform is singular")

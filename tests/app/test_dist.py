@@ -78,9 +78,20 @@ def read_all(folder: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def cluster():
-    """A local cluster of 2 worker processes for the tests that pass --scheduler."""
-    with dist._Cluster(dist.Where(workers=2), dist.WorkerSetup()) as c:
-        yield c
+    """A local cluster of 2 worker processes for the tests that pass --scheduler. Its workers trust
+    scene files (they run the tests' own builders): the environment they start with says so, as a
+    user's --trust-scene would."""
+    old = os.environ.get("PARAMLOD_TRUST_SCENE")
+    os.environ["PARAMLOD_TRUST_SCENE"] = "1"
+    try:
+        c = dist._Cluster(dist.Where(workers=2), dist.WorkerSetup()).__enter__()   # workers start now
+    finally:   # this process trusts no more than before
+        if old is None:
+            os.environ.pop("PARAMLOD_TRUST_SCENE", None)
+        else:
+            os.environ["PARAMLOD_TRUST_SCENE"] = old
+    yield c
+    c.__exit__(None, None, None)
 
 
 @pytest.fixture(scope="module")
@@ -109,7 +120,8 @@ def test_two_workers_render_the_serial_bytes_and_load_the_scene_once_each(tmp_pa
     assert "2 local worker(s)" in report.summary() and "frames/s" in report.summary()
 
 
-def test_a_worker_killed_in_a_task_has_it_run_elsewhere(tmp_path, cluster):
+def test_a_worker_killed_in_a_task_has_it_run_elsewhere(tmp_path, cluster, monkeypatch):
+    monkeypatch.setenv("PARAMLOD_TRUST_SCENE", "1")   # the killing builder is test code (the workers inherit it)
     marker = tmp_path / "killed"
     scene = worm_scene(tmp_path, f"""
         [[objects]]
@@ -133,7 +145,8 @@ def test_a_worker_killed_in_a_task_has_it_run_elsewhere(tmp_path, cluster):
     assert not list((tmp_path / "out").glob(".*")), "a temporary file was left behind"
 
 
-def test_a_task_that_kills_every_worker_fails_the_job_with_one_message(tmp_path):
+def test_a_task_that_kills_every_worker_fails_the_job_with_one_message(tmp_path, monkeypatch):
+    monkeypatch.setenv("PARAMLOD_TRUST_SCENE", "1")
     scene = worm_scene(tmp_path, """
         [[objects]]
         function = "sphere"

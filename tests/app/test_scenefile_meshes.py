@@ -84,7 +84,8 @@ matrix = [[1, 0, 0, 0], [0, 1, 0, 5], [0, 0, 1, 0], [0, 0, 0, 1]]
     assert sf.object_variants == ["points", "meshlets", "meshlets:4xSS", "meshlets"]
 
 
-def test_mesh_instances(files, mesh_loader):
+def test_mesh_instances(files, mesh_loader, monkeypatch):
+    monkeypatch.setenv("PARAMLOD_TRUST_SCENE", "1")   # numpy:eye is not a registered builder
     p = write(files, '''[[objects]]
 mesh = "meshes/ball.ply"
 instances = { grid = [3, 1, 2], spacing = [2, 1, 4] }
@@ -107,6 +108,7 @@ instances = { builder = "numpy:eye", args = { N = 4 } }
 
 
 def test_a_builder_gives_mesh_instances(files, mesh_loader, tmp_path, monkeypatch):
+    monkeypatch.setenv("PARAMLOD_TRUST_SCENE", "1")   # my_rows:rows is the user's own code
     (tmp_path / "my_rows.py").write_text(
         "import numpy as np\n"
         "def rows(n):\n"
@@ -154,7 +156,8 @@ def test_function_objects_take_a_grid_too(files, mesh_loader):
     ('mesh = "box.obj"\ninstances = { builder = "no_such_module:f" }', r"s\.toml:7: objects\[0\]\.instances: cannot load builder 'no_such_module:f'"),
     ('color = [1, 0, 0]', r"s\.toml:5: objects\[0\]\.function: is required .*or mesh = "),
 ])
-def test_mesh_errors_name_file_line_and_field(files, mesh_loader, body, expect):
+def test_mesh_errors_name_file_line_and_field(files, mesh_loader, body, expect, monkeypatch):
+    monkeypatch.setenv("PARAMLOD_TRUST_SCENE", "1")   # so that a missing builder module is what fails
     (files / "notes.txt").write_text("hello")
     (files / "empty.ply").write_bytes(b"")
     p = write(files, "[[objects]]\n" + body + "\n")

@@ -100,7 +100,7 @@ def test_cli_errors_are_messages_not_tracebacks(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "folder" in err and "does not exist" in err and "Traceback" not in err
     assert main(["render", str(p), "-o", str(tmp_path / "x.jpg")]) == 2
-    assert "unknown image type" in capsys.readouterr().err
+    assert "unknown file type" in capsys.readouterr().err
     assert main(["render", str(p), "-o", str(tmp_path / "x.png"), "-o", str(tmp_path / "x.exr")]) == 0
     assert (tmp_path / "x.png").exists() and (tmp_path / "x.exr").exists()
     assert not list(tmp_path.glob(".x.*"))  # no temporary files left behind

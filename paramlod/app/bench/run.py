@@ -27,7 +27,7 @@ import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
-from paramlod.app.args import add_size
+from paramlod.app.args import add_size, check_folder, non_negative_int, positive_float, positive_int
 from paramlod.app.bench.mesh_eval import SCENARIOS as EVAL_SCENARIOS, THRESHOLDS as EVAL_THRESHOLDS
 from paramlod.app.bench.mesh_eval import format_mesh_eval, plot_mesh_eval, run_mesh_eval
 from paramlod.app.bench.meshes import format_meshes, run_meshes
@@ -62,24 +62,24 @@ def add_arguments(p):
     p.add_argument("--variants", nargs="+", default=DEFAULT_VARIANTS, choices=list(VARIANTS),
                    help="render variants (default: all five)")
     add_size(p, "1920x1080", what="frame size")
-    p.add_argument("--distances", type=float, nargs="+", default=[0.35, 0.6, 1.0, 2.0],
+    p.add_argument("--distances", type=positive_float, nargs="+", default=[0.35, 0.6, 1.0, 2.0],
                    help="camera distances as multiples of the framing distance (default 0.35 0.6 1 2)")
-    p.add_argument("--frames", type=int, default=8, help="timed frames per orbit (default 8)")
-    p.add_argument("--warmup", type=int, default=2, help="untimed frames before each orbit (default 2)")
+    p.add_argument("--frames", type=positive_int, default=8, help="timed frames per orbit (default 8)")
+    p.add_argument("--warmup", type=non_negative_int, default=2, help="untimed frames before each orbit (default 2)")
     p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels", "meshes"],
                    choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval"],
                    help="extra measurements (default all but mesh-eval, the full / chain / DAG evaluation)")
     p.add_argument("--only-extras", action="store_true", help="skip the parametric scenarios: only the extras")
     p.add_argument("--big-mesh", choices=["auto", "yes", "no"], default="auto",
                    help="also measure a 1.6 M-triangle mesh (default: on a GPU only)")
-    p.add_argument("--mesh-grid", type=int, default=10, help="copies per side of the mesh grid (default 10)")
-    p.add_argument("--eval-thresholds", type=float, nargs="+", default=list(EVAL_THRESHOLDS),
+    p.add_argument("--mesh-grid", type=positive_int, default=10, help="copies per side of the mesh grid (default 10)")
+    p.add_argument("--eval-thresholds", type=positive_float, nargs="+", default=list(EVAL_THRESHOLDS),
                    help="mesh-eval: LOD thresholds in pixels (default 0.25 0.5 1 2 4)")
     p.add_argument("--eval-scenarios", nargs="+", choices=list(EVAL_SCENARIOS), default=list(EVAL_SCENARIOS),
                    help="mesh-eval: scenarios (default grid path close move)")
-    p.add_argument("--eval-move-frames", type=int, default=24,
+    p.add_argument("--eval-move-frames", type=positive_int, default=24,
                    help="mesh-eval: frames of the slow move that measures popping (default 24)")
-    p.add_argument("--eval-parts", type=int, default=1000,
+    p.add_argument("--eval-parts", type=non_negative_int, default=1000,
                    help="mesh-eval: parts of the many-parts mesh, 80 triangles each (default 1000; 0: none)")
     p.add_argument("--out", default="out/bench", help="folder for results (default out/bench)")
 
@@ -165,7 +165,7 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
     rs.tess.l_max = l_max
     rs.tess.l_min = l_min
     if aa:
-        rs.apply_aa(aa)
+        rs.apply_aa(aa, variant=variant)
     # the point variants run frame after frame without copying each to the host, as an
     # interactive viewer does (a frame's 80 MB read-back at 1080p is no part of a viewer's frame,
     # and the next frame's Python measured slower after it); one more frame, read back, gives
@@ -286,9 +286,9 @@ def run_bench(args) -> int:
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
         raise ParamlodError(f"unknown scenario(s) {', '.join(unknown)} (available: {', '.join(SCENARIOS)})")
+    # the results folder is checked (made, and a file created in it) before anything is measured
+    out = check_folder(Path(args.out), "--out", create=True)
     dev = cl_device()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     result = {"device": dev.name, "device_type": "GPU" if dev.is_gpu else "CPU", "host": platform.node(),
               "size": list(size), "frames": args.frames, "warmup": args.warmup, "scenarios": {}}
 
@@ -320,7 +320,7 @@ def run_bench(args) -> int:
                 except ParamlodError as exc:
                     r = {"distance": dist, "error": str(exc)}
                 rows.append(r)
-                msg = (f"{name} {vname} d={dist}: " + (f"{r['frame_ms']:.2f} ms ({r['fps']:.0f} FPS), LOD "
+                msg = (f"{name} {_row_label(vname, r)} d={dist}: " + (f"{r['frame_ms']:.2f} ms ({r['fps']:.0f} FPS), LOD "
                        f"{r['lod_ms']:.2f}, render {r['render_ms']:.2f}, {r['render_patches']:.0f} patches"
                        if "error" not in r else f"error: {r['error']}"))
                 print(msg, flush=True)
@@ -348,6 +348,14 @@ def run_bench(args) -> int:
     print(md)
     print(f"results: {out / 'results.json'}, {out / 'results.md'}" + (f", {len(plots)} plots" if plots else ""))
     return 0
+
+
+def _row_label(vname: str, r: dict) -> str:
+    """The variant's name, and what it really ran when the device gave fewer samples than it asks
+    (e.g. tess-4xSS+8xMS on a device of 4 MSAA samples), so that a row is never mislabelled."""
+    _, asked = VARIANTS.get(vname, (None, None))
+    ran = r.get("aa_effective")
+    return f"{vname} (ran {ran})" if asked and ran and str(ran) != asked else vname
 
 
 def _rate(per_s: float) -> str:
@@ -378,7 +386,8 @@ def format_markdown(result) -> str:
                 elif vname.startswith("tess") and "tess_ceiling" in result and r.get("triangles"):
                     frac = f"{100 * r['triangles'] / (r['render_ms'] * 1e-3) / result['tess_ceiling']['triangles_per_s']:.1f}% tris"
                 host = "n/a" if r.get("host_ms") is None else f"{r['host_ms']:.2f}"
-                lines.append(f"| {name} | {vname} | {r['distance']} | {r['fps']:.0f} | {r['frame_ms']:.2f} "
+                label = _row_label(vname, r)
+                lines.append(f"| {name} | {label} | {r['distance']} | {r['fps']:.0f} | {r['frame_ms']:.2f} "
                              f"({r['frame_ms_p95']:.2f}) | {r['lod_ms']:.2f} | {r['render_ms']:.2f} | {host} | "
                              f"{r['render_patches']:.0f} | {frac} |")
     if "function_throughput" in result:
