@@ -28,7 +28,7 @@ A cluster's ``group`` is its level.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,8 +36,8 @@ from paramlod.core.layouts import CLUSTER
 from paramlod.errors import MeshError
 from paramlod.meshlod import cut_reference
 from paramlod.meshlod.build import meshopt
-from paramlod.meshlod.build.dag import (BuildSettings, _cluster_bounds, _Progress, _round_up32, check_mesh,
-                                        vertex_normals, weld_ids)
+from paramlod.meshlod.build.dag import (BuildSettings, Progress, SettingsRecord, check_mesh, cluster_bounds,
+                                        round_up32, vertex_normals, weld_ids)
 from paramlod.meshlod.format import MeshLod
 
 _INFLATE = 1e-6        # relative slack on the sphere's radius (the DAG's)
@@ -46,7 +46,8 @@ CLUSTER_MAX_TRIANGLES = CLUSTER.constant("CLUSTER_MAX_TRIANGLES")
 
 
 @dataclass(frozen=True)
-class ChainSettings:
+class ChainSettings(SettingsRecord):
+    WHAT = "chain build"
     max_triangles: int = 128    # per cluster (<= CLUSTER_MAX_TRIANGLES, a multiple of 4)
     max_vertices: int = 255     # per cluster (meshoptimizer's limit)
     cone_weight: float = 0.25   # meshlet shape vs backface-cone tightness (meshopt_buildMeshlets)
@@ -78,18 +79,6 @@ class ChainSettings:
             bad("max_levels", "must be in 1..64")
         return self
 
-    def as_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "ChainSettings":
-        known = set(cls.__dataclass_fields__)
-        unknown = set(d) - known
-        if unknown:
-            raise MeshError(f"unknown chain build settings {', '.join(sorted(unknown))} "
-                            f"(known: {', '.join(sorted(known))})")
-        return cls(**d).validate()
-
     @classmethod
     def like(cls, dag: BuildSettings) -> "ChainSettings":
         """The chain settings that share a DAG build's cluster size, cone weight, ratio, stall and
@@ -104,7 +93,7 @@ def bounding_sphere(vertices: np.ndarray) -> np.ndarray:
     v = np.asarray(vertices, np.float64)
     centre = np.float32((v.min(axis=0) + v.max(axis=0)) / 2)
     r = float(np.sqrt(((v - centre.astype(np.float64)) ** 2).sum(axis=1).max()))
-    return np.array([*centre, _round_up32(r * (1 + _INFLATE) + 1e-30)], np.float32)
+    return np.array([*centre, round_up32(r * (1 + _INFLATE) + 1e-30)], np.float32)
 
 
 def build_chain(vertices, faces, normals=None, *, settings: ChainSettings = ChainSettings(), progress=None,
@@ -132,7 +121,7 @@ def build_chain(vertices, faces, normals=None, *, settings: ChainSettings = Chai
 
     levels = [(f, 0.0, 0.0)]     # (triangles, cumulative error, the simplifier's own error)
     stopped = "min_triangles"
-    bar = _Progress(progress, 2 * len(f), len(f))   # the levels add up to about twice the mesh
+    bar = Progress(progress, 2 * len(f), len(f))   # the levels add up to about twice the mesh
     try:
         current, error = f, 0.0
         while len(current) > s.min_triangles:
@@ -165,7 +154,7 @@ def build_chain(vertices, faces, normals=None, *, settings: ChainSettings = Chai
         starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         for i in range(len(counts)):
             t = mt[starts[i]:starts[i + 1]]
-            rows.append((k, first_tri, len(t), _cluster_bounds(t, v), e, errors[k + 1]))
+            rows.append((k, first_tri, len(t), cluster_bounds(t, v), e, errors[k + 1]))
             first_tri += len(t)
         tris_out.append(mt)
     c = np.zeros(len(rows), CLUSTER.dtype)

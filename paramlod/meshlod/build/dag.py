@@ -48,8 +48,25 @@ _QUIET_BELOW = 200_000 # triangles: builds smaller than this show no progress ba
 CLUSTER_MAX_TRIANGLES = CLUSTER.constant("CLUSTER_MAX_TRIANGLES")
 
 
+class SettingsRecord:
+    """as_dict / from_dict (unknown names refused) for the frozen settings dataclasses of the builds."""
+    WHAT = "build"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        known = set(cls.__dataclass_fields__)
+        unknown = set(d) - known
+        if unknown:
+            raise MeshError(f"unknown {cls.WHAT} settings {', '.join(sorted(unknown))} "
+                            f"(known: {', '.join(sorted(known))})")
+        return cls(**d).validate()
+
+
 @dataclass(frozen=True)
-class BuildSettings:
+class BuildSettings(SettingsRecord):
     max_triangles: int = 128    # per cluster (<= CLUSTER_MAX_TRIANGLES, a multiple of 4)
     max_vertices: int = 255     # per cluster (meshoptimizer's limit; the raster reads global indices)
     cone_weight: float = 0.25   # meshlet shape vs backface-cone tightness (meshopt_buildMeshlets)
@@ -77,17 +94,6 @@ class BuildSettings:
         if not 1 <= self.max_levels <= 64:
             bad("max_levels", "must be in 1..64")
         return self
-
-    def as_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "BuildSettings":
-        known = set(cls.__dataclass_fields__)
-        unknown = set(d) - known
-        if unknown:
-            raise MeshError(f"unknown build settings {', '.join(sorted(unknown))} (known: {', '.join(sorted(known))})")
-        return cls(**d).validate()
 
 
 # --- input ------------------------------------------------------------------------------------------
@@ -156,7 +162,7 @@ def weld_ids(vertices: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 # --- spheres ----------------------------------------------------------------------------------------
-def _round_up32(x: float) -> np.float32:
+def round_up32(x: float) -> np.float32:
     y = np.float32(x)
     return y if float(y) >= x else np.nextafter(y, np.float32(np.inf))
 
@@ -176,10 +182,10 @@ def enclosing_sphere(spheres: np.ndarray) -> np.ndarray:
         if best is None or r < best[1]:
             best = (centre, r)
     centre, r = best
-    return np.array([*np.float32(centre), _round_up32(r * (1 + _INFLATE) + 1e-30)], np.float32)
+    return np.array([*np.float32(centre), round_up32(r * (1 + _INFLATE) + 1e-30)], np.float32)
 
 
-def _cluster_bounds(tris: np.ndarray, positions: np.ndarray):
+def cluster_bounds(tris: np.ndarray, positions: np.ndarray):
     """(sphere [4], apex [3], cone [4]) of one cluster, its sphere made to contain its vertices."""
     b = meshopt.cluster_bounds(tris, positions)
     pts = positions[tris.reshape(-1)].astype(np.float64)
@@ -190,7 +196,7 @@ def _cluster_bounds(tris: np.ndarray, positions: np.ndarray):
         c = np.float32((pts.min(axis=0) + pts.max(axis=0)) / 2).astype(np.float64)
         cutoff = NEVER_CULL
     r = max(float(b.radius), float(np.max(np.linalg.norm(pts - c, axis=1))))
-    sphere = np.array([*np.float32(c), _round_up32(r * (1 + _INFLATE) + 1e-30)], np.float32)
+    sphere = np.array([*np.float32(c), round_up32(r * (1 + _INFLATE) + 1e-30)], np.float32)
     if cutoff >= 1.0 or not np.any(axis):
         cutoff, apex = NEVER_CULL, sphere[:3].copy()
         axis = np.zeros(3, np.float32)
@@ -267,7 +273,7 @@ class _Clusters:
         return c, tris
 
 
-class _Progress:
+class Progress:
     def __init__(self, progress, total: int, triangles: int):
         self.done, self.total, self.call, self.bar = 0, max(total, 1), None, None
         if callable(progress):
@@ -317,13 +323,13 @@ def build_dag(vertices, faces, normals=None, *, settings: BuildSettings = BuildS
     starts = np.concatenate([[0], np.cumsum(counts0)]).astype(np.int64)
     for i in range(len(counts0)):
         t = tris0[starts[i]:starts[i + 1]]
-        b = _cluster_bounds(t, v)
+        b = cluster_bounds(t, v)
         out.add(t, b, b[0], 0.0, 0, i)   # a level-0 cluster: its own group, its own sphere
     next_group = len(out)
     stats = {"stalled_groups": 0, "rounds": 0}
 
     if lod == "dag":
-        bar = _Progress(progress, 2 * len(f), len(f))
+        bar = Progress(progress, 2 * len(f), len(f))
         try:
             next_group = _simplify_rounds(out, v, weld, n_weld, s, err_floor, radius, next_group, bar, stats)
         finally:
@@ -339,7 +345,7 @@ def build_dag(vertices, faces, normals=None, *, settings: BuildSettings = BuildS
 
 
 def _simplify_rounds(out: _Clusters, v, weld, n_weld, s: BuildSettings, err_floor, radius, next_group,
-                     bar: _Progress, stats) -> int:
+                     bar: Progress, stats) -> int:
     first = np.full(n_weld, len(v), np.int64)
     np.minimum.at(first, weld, np.arange(len(v)))
     rep = first[weld]   # each vertex's representative: the first vertex at its position
@@ -442,7 +448,7 @@ def _simplify_group(out: _Clusters, grp, v, weld, rep, locked_weld, s: BuildSett
     for k in counts:
         t_local = new_tris[start:start + int(k)]
         start += int(k)
-        made.append(out.add(uniq[t_local].astype(np.uint32), _cluster_bounds(t_local, pos), sphere, e, level, group_id))
+        made.append(out.add(uniq[t_local].astype(np.uint32), cluster_bounds(t_local, pos), sphere, e, level, group_id))
     return made
 
 
