@@ -23,6 +23,11 @@ inline Sample lod_sample(uint func, __global const float* P, __global const floa
     float3 w = xform_point(I + INST_MODEL, p);
     float3 e = xform_point(cam + CAM_VIEW, w);
     float4 c = project(cam, e);
+    // a finite position can still overflow float32 on its way to clip space (a function returning
+    // ~1e38): such a sample is bad like a NaN one, never a reason to split forever
+    if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z) && isfinite(c.w))) {
+        r.s = (float2)(0.0f, 0.0f); r.state = 2; r.code = 63u; return r;
+    }
     r.code = outcode(c);
     if (c.w >= cam[CAM_NEAR]) {
         r.state = 0;

@@ -33,7 +33,7 @@ from paramlod.surfels.render import FixedCount, FixedSize
 
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation", "camera_path"}   # camera_path: docs/scale-out.md
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
-RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches",
+RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches", "patch_budget",
                "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "translate", "rotate", "scale", "matrix", "variant",
                "instances", "sh_field", "surfels", "mesh", "lod"}
@@ -167,7 +167,9 @@ def load_scene(path, size=None) -> SceneFile:
         lod=LodSettings(threshold=(float(th[0]), float(th[1])),
                         max_steps=ck.num(r, "max_steps", "render", "render", default=12, lo=1, hi=15, integer=True),
                         initial_grid=tuple(grid),
-                        max_patches=ck.num(r, "max_patches", "render", "render", default=1 << 24, lo=1, integer=True)),
+                        max_patches=ck.num(r, "max_patches", "render", "render", default=1 << 24, lo=1, integer=True),
+                        patch_budget=ck.num(r, "patch_budget", "render", "render", default=LodSettings.patch_budget,
+                                            lo=1, integer=True)),
         points=PointSettings(density=ck.num(r, "density", "render", "render", default=PointSettings.density, lo=0.1, hi=16)))
     background = ck.vec(r, "background", 3, "render", "render", default=[0.12, 0.12, 0.14])
     settings.tess = _tess_settings(r, ck)

@@ -28,11 +28,13 @@ def _project(scene_inst, functions, cam, inst, u, v):
     bad = ~np.all(np.isfinite(pos), axis=-1)
     M = inst_f[inst, 0:16].reshape(shape + (4, 4))
     p4 = np.concatenate([pos, np.ones(shape + (1,), np.float32)], axis=-1)
-    w = np.einsum("...ij,...j->...i", M[..., :3, :], p4)
     view = cam[0:16].reshape(4, 4)
     proj = cam[16:32].reshape(4, 4)
-    e = np.einsum("ij,...j->...i", view[:3, :], np.concatenate([w, np.ones(shape + (1,), np.float32)], axis=-1))
-    c = np.einsum("ij,...j->...i", proj, np.concatenate([e, np.ones(shape + (1,), np.float32)], axis=-1))
+    with np.errstate(over="ignore", invalid="ignore"):   # overflowing samples are marked bad below
+        w = np.einsum("...ij,...j->...i", M[..., :3, :], p4)
+        e = np.einsum("ij,...j->...i", view[:3, :], np.concatenate([w, np.ones(shape + (1,), np.float32)], axis=-1))
+        c = np.einsum("ij,...j->...i", proj, np.concatenate([e, np.ones(shape + (1,), np.float32)], axis=-1))
+    bad |= ~np.all(np.isfinite(c), axis=-1)   # overflowed on the way to clip space (kernel: lod_sample)
     x, y, z, cw = c[..., 0], c[..., 1], c[..., 2], c[..., 3]
     with np.errstate(invalid="ignore"):
         code = ((x < -cw) * 1 | (x > cw) * 2 | (y < -cw) * 4 | (y > cw) * 8 | (z < -cw) * 16 | (z > cw) * 32).astype(np.uint32)

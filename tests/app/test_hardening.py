@@ -345,3 +345,12 @@ def test_a_bench_row_says_what_it_ran():
     assert bench._row_label("tess-4xSS+8xMS", {"aa_effective": "4xSS+4xMS"}) == "tess-4xSS+8xMS (ran 4xSS+4xMS)"
     assert bench._row_label("tess-4xSS+8xMS", {"aa_effective": "4xSS+8xMS"}) == "tess-4xSS+8xMS"
     assert bench._row_label("points", {}) == "points"
+
+
+def test_patch_budget_in_a_scene_file(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text('[render]\npatch_budget = 4096\n\n[[objects]]\nfunction = "sphere"\n')
+    assert load_scene(p).settings.lod.patch_budget == 4096
+    p.write_text('[render]\npatch_budget = 0\n\n[[objects]]\nfunction = "sphere"\n')
+    with pytest.raises(pl.SceneError, match="render.patch_budget"):
+        load_scene(p)

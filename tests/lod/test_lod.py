@@ -171,3 +171,25 @@ def test_capacity_limit_is_named():
     cam = pl.Camera.look_at((0, 0, 3.0), (0, 0, 0), size=(512, 512))
     with pytest.raises(pl.CapacityError, match="max_patches=100"):
         cl_render_list(scene, cam, pl.LodSettings(threshold=(4.0, 4.0), max_patches=100))
+
+
+@pl.parametric(u=(0, 1), v=(0, 1))
+def overflowing_sheet(u, v):
+    # a flat sheet whose far half sits at 3e38: finite in object space, beyond float32 once the
+    # instance's scale of 2 is applied on the way to clip space
+    return u, v, pl.dsl.where(u > 0.5, 3e38, 0.0)
+
+
+def test_samples_that_overflow_in_clip_space_are_bad_not_split_forever():
+    scene = pl.Scene()
+    scene.add(overflowing_sheet, transform=pl.rotate(20, (1, 0, 0)) @ pl.scale(2))
+    cam = pl.Camera.look_at((0.5, 0.5, 3), (0.5, 0.5, 0), size=(160, 120))
+    lod = pl.LodSettings(threshold=(20.0, 20.0))
+    got, steps = cl_render_list(scene, cam, lod)   # before: 2.8 M patches, stopped by patch_budget
+    ref, ref_steps = run_lod(scene, camera_record(cam), lod)
+    assert steps == ref_steps
+    for g, r in zip(canonical(got), canonical(ref)):
+        np.testing.assert_array_equal(g, r)
+    assert sum(s["in"] for s in steps) < 1_000
+    f = pl.render(scene, cam)
+    assert (f.object_id == 1).sum() > 0   # the finite half is drawn
