@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 import paramlod as pl
+from paramlod.scene import loaders
 
 
 def sphere_disc(camera, center=(0, 0, 0), radius=1.0):
@@ -99,6 +100,20 @@ def _mesh_cache(tmp_path_factory):
         os.environ.pop("PARAMLOD_CACHE", None)
     else:
         os.environ["PARAMLOD_CACHE"] = old
+
+
+@pytest.fixture
+def mesh_loader():
+    """The calls scenes make to the registered "mesh" loader (paramlod.meshlod's), as (source, options)."""
+    previous, calls = loaders.LOADERS["mesh"], []
+
+    def counting(source, **options):
+        calls.append((source, options))
+        return previous(source, **options)
+
+    loaders.register_loader("mesh", counting)
+    yield calls
+    loaders.register_loader("mesh", previous)
 
 
 @pytest.fixture(scope="session")

@@ -16,20 +16,15 @@
 // An instance whose hand-off weight (`weights`, paramlod/scene/handoff.py) is 0 selects nothing and
 // makes no tests: its surfels draw every pixel (a group holds one instance).
 #pragma OPENCL FP_CONTRACT OFF
+#include "common/rows.cl"
 
 // the cut camera record, passed by value with the launch (no buffer write per frame)
 typedef struct { float v[CC_FLOATS]; } CutCamera;
 
-inline float3 cut_world(__global const float* m, float3 p) {
-    return (float3)(((m[0] * p.x + m[1] * p.y) + m[2] * p.z) + m[3],
-                    ((m[4] * p.x + m[5] * p.y) + m[6] * p.z) + m[7],
-                    ((m[8] * p.x + m[9] * p.y) + m[10] * p.z) + m[11]);
-}
-
 // The projected error in pixels of error e around object-space sphere S (0 for e == 0).
 inline float cut_proj(float e, float4 S, __global const float* m, float s, const float* cc) {
     if (e == 0.0f) return 0.0f;
-    float3 w = cut_world(m, S.xyz);
+    float3 w = rows_point(m, S.xyz);
     float depth = ((cc[CC_DEPTH] * w.x + cc[CC_DEPTH + 1] * w.y) + cc[CC_DEPTH + 2] * w.z) + cc[CC_DEPTH + 3];
     float dn = fmax(depth - S.w * s, cc[CC_NEAR]);
     float wd = cc[CC_WA] * dn + cc[CC_WB];
@@ -38,7 +33,7 @@ inline float cut_proj(float e, float4 S, __global const float* m, float s, const
 
 // True when the bounding sphere (world centre, radius r * s) lies wholly outside one clip plane.
 inline bool cut_outside(float4 S, __global const float* m, float s, const float* cc) {
-    float3 w = cut_world(m, S.xyz);
+    float3 w = rows_point(m, S.xyz);
     float r = S.w * s;
     bool out = false;
     for (int k = 0; k < 6; ++k) {

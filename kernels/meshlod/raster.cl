@@ -21,7 +21,7 @@
 // instance) draws only the pixels whose dither (keys.cl pl_dither) is below w; its surfels draw the
 // others.
 #pragma OPENCL FP_CONTRACT OFF
-
+#include "common/rows.cl"
 #include "common/keys.cl"
 #include "meshlod/debug_color.cl"
 
@@ -60,18 +60,6 @@ typedef struct {
     float3 e[3], n[3];      // view position, view normal of each vertex
     int x0, y0, x1, y1;     // pixel bounding box, clamped to the screen
 } RsTri;
-
-inline float3 rs_point(__global const float* m, float3 p) {
-    return (float3)(((m[0] * p.x + m[1] * p.y) + m[2] * p.z) + m[3],
-                    ((m[4] * p.x + m[5] * p.y) + m[6] * p.z) + m[7],
-                    ((m[8] * p.x + m[9] * p.y) + m[10] * p.z) + m[11]);
-}
-
-inline float3 rs_dir(__global const float* m, float3 d) {
-    return (float3)((m[0] * d.x + m[1] * d.y) + m[2] * d.z,
-                    (m[4] * d.x + m[5] * d.y) + m[6] * d.z,
-                    (m[8] * d.x + m[9] * d.y) + m[10] * d.z);
-}
 
 inline float rs_row(__global const float* P, int r, float3 e) {
     return ((P[4 * r] * e.x + P[4 * r + 1] * e.y) + P[4 * r + 2] * e.z) + P[4 * r + 3];
@@ -131,8 +119,8 @@ inline int rs_polygon(RsPoly* p, uint tri, uint inst,
     bool bad = false, beyond = true;
     for (int i = 0; i < 3; ++i) {
         uint v = triangles[3 * tri + i];
-        p->e[i] = rs_point(V, rs_point(M, vertices[v].xyz));
-        p->n[i] = rs_dir(V, rs_dir(N, normals[v].xyz));
+        p->e[i] = rows_point(V, rows_point(M, vertices[v].xyz));
+        p->n[i] = rows_dir(V, rows_dir(N, normals[v].xyz));
         bad = bad || is_bad3(p->e[i]) || is_bad3(p->n[i]);
         beyond = beyond && -p->e[i].z > far;
     }

@@ -6,18 +6,7 @@
 // `mesh_weight` are left to the mesh (0: every pixel is the surfels').
 // numpy twin: paramlod/surfels/build/reference.py splat_discs (coverage and depth keys bit-identical).
 #pragma OPENCL FP_CONTRACT OFF
-
-inline float3 sf_point(__global const float* m, float3 p) {
-    return (float3)(((m[0] * p.x + m[1] * p.y) + m[2] * p.z) + m[3],
-                    ((m[4] * p.x + m[5] * p.y) + m[6] * p.z) + m[7],
-                    ((m[8] * p.x + m[9] * p.y) + m[10] * p.z) + m[11]);
-}
-
-inline float3 sf_dir(__global const float* m, float3 d) {
-    return (float3)((m[0] * d.x + m[1] * d.y) + m[2] * d.z,
-                    (m[4] * d.x + m[5] * d.y) + m[6] * d.z,
-                    (m[8] * d.x + m[9] * d.y) + m[10] * d.z);
-}
+#include "common/rows.cl"
 
 inline float sf_dot(float3 a, float3 b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
 
@@ -54,8 +43,8 @@ __kernel void surfels_splat(__global const float4* pos, __global const float4* n
     uint iw = (uint)W, ih = (uint)H;
     __global const float* P = cam + CAM_PROJ;
     __global const float* V = cam + CAM_VIEW;
-    float3 e = sf_point(xf, pos[i].xyz);
-    float3 nv = sf_dir(xf + 12, nrm[i].xyz);
+    float3 e = rows_point(xf, pos[i].xyz);
+    float3 nv = rows_dir(xf + 12, nrm[i].xyz);
     float r2 = radius * radius;
 
     if (is_bad3(e) || is_bad3(nv) || !(radius > 0.0f)) { atom_add(&counters[3], (ulong)1); return; }

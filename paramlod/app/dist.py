@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-from paramlod.app.args import check_folder, parse_size
+from paramlod.app.args import check_folder, parse_size, positive_int
 from paramlod.app.scenefile import load_scene
 from paramlod.core.camera import Camera
 from paramlod.core.files import write_atomically
@@ -203,16 +203,6 @@ class Where:
                    getattr(args, "retries", DEFAULT_RETRIES))
 
 
-def _positive_int(text: str) -> int:
-    try:
-        n = int(text)
-        if n < 1:
-            raise ValueError
-        return n
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}") from None
-
-
 def _gpus(text: str) -> str:
     t = text.strip().lower()
     if t == "all" or (t and all(p.strip().isdigit() for p in t.split(","))):
@@ -224,7 +214,7 @@ def add_job_options(parser):
     """``--workers N | --gpus all | --scheduler ADDRESS``, ``--retries``, ``--overwrite``."""
     g = parser.add_argument_group("where the job runs (default: in this process, one task after the other)")
     m = g.add_mutually_exclusive_group()
-    m.add_argument("--workers", type=_positive_int, metavar="N",
+    m.add_argument("--workers", type=positive_int, metavar="N",
                    help="a local Dask cluster of N worker processes (one task at a time each)")
     m.add_argument("--gpus", type=_gpus, metavar="all|I,J",
                    help="a local Dask cluster of one worker per OpenCL GPU, each pinned to its GPU")
@@ -249,23 +239,6 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def _cl_devices():
-    """Every OpenCL device of every platform (no context is made in this process)."""
-    import pyopencl as cl
-
-    try:
-        platforms = cl.get_platforms()
-    except cl.Error:
-        return []
-    out = []
-    for p in platforms:
-        try:
-            out.extend(p.get_devices())
-        except cl.Error:
-            continue
-    return out
-
-
 def usable_gpus(selector: str | None = None) -> list[dict]:
     """The OpenCL GPUs the renderers can use (64-bit atomics), optionally those whose name or
     platform contains ``selector``: dicts of platform, name, vendor, ordinal (the device's index
@@ -273,7 +246,7 @@ def usable_gpus(selector: str | None = None) -> list[dict]:
     import pyopencl as cl
 
     found = []
-    devices = _cl_devices()
+    devices = device_context.list_devices()
     for d in devices:
         if not d.type & cl.device_type.GPU:
             continue
@@ -1070,10 +1043,10 @@ def format_bench(res: dict) -> str:
 def add_bench_arguments(p):
     """``paramlod bench-scale``."""
     p.add_argument("--scene", default="gallery/giant_worm.toml", help="an animated scene file")
-    p.add_argument("--frames", type=_positive_int, default=24, help="frames per run (default 24)")
+    p.add_argument("--frames", type=positive_int, default=24, help="frames per run (default 24)")
     p.add_argument("--size", default="320x240", help="frame size WxH (default 320x240)")
     p.add_argument("--workers", default="1,2", help="worker counts, comma separated (default 1,2)")
-    p.add_argument("--threads", type=_positive_int, help="PoCL threads per CPU worker (default: cores / largest count)")
+    p.add_argument("--threads", type=positive_int, help="PoCL threads per CPU worker (default: cores / largest count)")
     p.add_argument("--gpus", type=_gpus, help="also one worker per GPU ('all' or indices)")
     p.add_argument("--json", metavar="FILE", help="write the numbers as JSON")
 
@@ -1083,7 +1056,7 @@ def run_bench_scaling(args) -> int:
 
     try:
         size = parse_size(args.size) if isinstance(args.size, str) else args.size
-        counts = tuple(_positive_int(x) for x in str(args.workers).split(","))
+        counts = tuple(positive_int(x) for x in str(args.workers).split(","))
     except argparse.ArgumentTypeError as exc:
         raise ParamlodError(f"bench-scale: {exc}") from None
     res = bench_scaling(args.scene, args.frames, size, counts, args.threads, args.gpus, progress=True)

@@ -42,7 +42,8 @@ _gl = None
 _gl_cache: dict = {}   # objects that live as long as the GL context (compiled shader programs)
 
 
-def _list_devices():
+def list_devices() -> list:
+    """Every OpenCL device of every platform (no context is made)."""
     import pyopencl as cl
 
     try:
@@ -106,7 +107,7 @@ def cl_device() -> CLDevice:
         import pyopencl as cl
 
         selector = _cl_override or os.environ.get("PARAMLOD_CL_DEVICE") or None
-        dev = choose_device(_list_devices(), selector)
+        dev = choose_device(list_devices(), selector)
         ctx = cl.Context([dev])
         _cl = CLDevice(ctx, cl.CommandQueue(ctx, properties=cl.command_queue_properties.PROFILING_ENABLE), dev)
     return _cl
@@ -184,4 +185,4 @@ def gl_info() -> dict:
 def all_cl_devices_summary() -> str:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return _describe(_list_devices())
+        return _describe(list_devices())

@@ -136,7 +136,7 @@ class MeshletsGL:
             cl_device().queue.finish()
             if not self.selection.grow():
                 break
-        pairs = self.selection.read_pairs()
+        pairs = self.selection.read_pairs(self.selection.counts()["selected"])   # the counters the loop collected
         frame = self.draw.draw(pairs, camera, settings.tess.aa, COLOR_BY[s.color_by], LIGHT, self.background,
                                weights=weights)
         stats = _mesh_stats(self.selection, events, {}, self.dev, weights)

@@ -1,7 +1,7 @@
 """Scene files with meshes: ``[[objects]] mesh = "x.ply"`` with lod, material, transform, variant,
 instances (a builder or a grid), and every error naming the file, the line and the field.
 
-The registered "mesh" loader (paramlod.meshlod's) is wrapped to count its calls.
+The registered "mesh" loader is wrapped to count its calls (the ``mesh_loader`` fixture, tests/conftest.py).
 """
 import numpy as np
 import pytest
@@ -9,21 +9,6 @@ import trimesh
 
 import paramlod as pl
 from paramlod.app.scenefile import load_scene
-from paramlod.scene import loaders
-
-
-@pytest.fixture
-def mesh_loader():
-    """The registered "mesh" loader (paramlod.meshlod's), counting its calls."""
-    previous, calls = loaders.LOADERS["mesh"], []
-
-    def counting(source, **options):
-        calls.append((source, options))
-        return previous(source, **options)
-
-    loaders.register_loader("mesh", counting)
-    yield calls
-    loaders.register_loader("mesh", previous)
 
 
 HEAD = """[camera]

@@ -1,7 +1,7 @@
 """The LOD stage's per-frame patch budget: a view where every patch keeps splitting stops with a
 CapacityError naming patch_budget (device stage and numpy twin alike), through every variant, and
 no sane frame comes near the default."""
-import time
+import re
 
 import numpy as np
 import pytest
@@ -64,11 +64,12 @@ def test_a_view_where_everything_splits_stops_soon_in_every_variant(variant):
     scene, cam = sphere_view()
     rs = pl.RenderSettings()
     rs.lod = LodSettings(threshold=(1e-3, 1e-3), max_steps=12, patch_budget=20000)
-    t0 = time.perf_counter()
     with pytest.raises(pl.CapacityError, match="patch_budget=20000") as exc:
         pl.render(scene, cam, variant=variant, settings=rs)
-    assert time.perf_counter() - t0 < 60
     assert "raise [lod] patch_budget" in str(exc.value)
+    # stopped within a few grown stages of the budget, not after the whole 4^11 split
+    made = int(re.search(r"made (\d+) patches", str(exc.value)).group(1))
+    assert 20000 < made < 64 * 20000
     # and the state is not poisoned: the next sane frame of the same scene renders
     f = pl.render(scene, cam, variant=variant)
     assert f.stats["pixels_written"] > 0

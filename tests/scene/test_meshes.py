@@ -1,8 +1,8 @@
 """Mesh sources: paramlod.scene.meshes.read_mesh over every format and bad input, and the scene's
 add_mesh / add_mesh_instances (validation, one load per source, object ids, subscenes).
 
-The scene asks the loader registry for a "mesh" MeshLod; the fixture ``mesh_loader`` wraps the
-registered loader (paramlod.meshlod's) and counts the calls.
+The scene asks the loader registry for a "mesh" MeshLod; the fixture ``mesh_loader``
+(tests/conftest.py) wraps the registered loader and counts the calls.
 """
 import warnings
 
@@ -14,20 +14,6 @@ import paramlod as pl
 from paramlod.errors import MeshError, SceneError
 from paramlod.scene import loaders
 from paramlod.scene.meshes import read_mesh, source_key
-
-
-@pytest.fixture
-def mesh_loader():
-    """The calls the scene made to the registered "mesh" loader (paramlod.meshlod's), as (source, options)."""
-    previous, calls = loaders.LOADERS["mesh"], []
-
-    def counting(source, **options):
-        calls.append((source, options))
-        return previous(source, **options)
-
-    loaders.register_loader("mesh", counting)
-    yield calls
-    loaders.register_loader("mesh", previous)
 
 
 def icosphere(subdiv=1):

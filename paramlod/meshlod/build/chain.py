@@ -58,25 +58,12 @@ class ChainSettings(SettingsRecord):
     prune: bool = True          # let the simplifier drop whole small parts (the DAG's default)
 
     def validate(self) -> "ChainSettings":
-        def bad(name, rule):
-            raise MeshError(f"chain build setting {name}={getattr(self, name)!r}: {rule}")
         for name in ("max_triangles", "max_vertices", "min_triangles", "max_levels"):
             if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), (int, np.integer)):
-                bad(name, "must be an integer")
-        if not (4 <= self.max_triangles <= CLUSTER_MAX_TRIANGLES and self.max_triangles % 4 == 0):
-            bad("max_triangles", f"must be a multiple of 4 in 4..{CLUSTER_MAX_TRIANGLES}")
-        if not 3 <= self.max_vertices <= meshopt.MAX_MESHLET_VERTICES:
-            bad("max_vertices", f"must be in 3..{meshopt.MAX_MESHLET_VERTICES}")
-        if not 0.0 <= self.cone_weight <= 1.0:
-            bad("cone_weight", "must be in [0, 1]")
-        if not 0.05 <= self.ratio <= 0.9:
-            bad("ratio", "must be in [0.05, 0.9]")
-        if not self.ratio < self.stall < 1.0:
-            bad("stall", "must be above ratio and below 1")
+                self.bad(name, "must be an integer")
+        self.check_meshlets_and_levels()
         if not self.min_triangles >= 1:
-            bad("min_triangles", "must be >= 1")
-        if not 1 <= self.max_levels <= 64:
-            bad("max_levels", "must be in 1..64")
+            self.bad("min_triangles", "must be >= 1")
         return self
 
     @classmethod

@@ -64,6 +64,25 @@ class SettingsRecord:
                             f"(known: {', '.join(sorted(known))})")
         return cls(**d).validate()
 
+    def bad(self, name, rule):
+        raise MeshError(f"{self.WHAT} setting {name}={getattr(self, name)!r}: {rule}")
+
+    def check_meshlets_and_levels(self):
+        """The fields both builds have: meshlet limits, the reduction per round, the rounds."""
+        bad = self.bad
+        if not (4 <= self.max_triangles <= CLUSTER_MAX_TRIANGLES and self.max_triangles % 4 == 0):
+            bad("max_triangles", f"must be a multiple of 4 in 4..{CLUSTER_MAX_TRIANGLES}")
+        if not 3 <= self.max_vertices <= meshopt.MAX_MESHLET_VERTICES:
+            bad("max_vertices", f"must be in 3..{meshopt.MAX_MESHLET_VERTICES}")
+        if not 0.0 <= self.cone_weight <= 1.0:
+            bad("cone_weight", "must be in [0, 1]")
+        if not 0.05 <= self.ratio <= 0.9:
+            bad("ratio", "must be in [0.05, 0.9]")
+        if not self.ratio < self.stall < 1.0:
+            bad("stall", "must be above ratio and below 1")
+        if not 1 <= self.max_levels <= 64:
+            bad("max_levels", "must be in 1..64")
+
 
 @dataclass(frozen=True)
 class BuildSettings(SettingsRecord):
@@ -77,22 +96,9 @@ class BuildSettings(SettingsRecord):
     prune: bool = True          # let the simplifier drop whole small parts that touch no locked vertex
 
     def validate(self) -> "BuildSettings":
-        def bad(name, rule):
-            raise MeshError(f"build setting {name}={getattr(self, name)!r}: {rule}")
-        if not (4 <= self.max_triangles <= CLUSTER_MAX_TRIANGLES and self.max_triangles % 4 == 0):
-            bad("max_triangles", f"must be a multiple of 4 in 4..{CLUSTER_MAX_TRIANGLES}")
-        if not 3 <= self.max_vertices <= meshopt.MAX_MESHLET_VERTICES:
-            bad("max_vertices", f"must be in 3..{meshopt.MAX_MESHLET_VERTICES}")
-        if not 0.0 <= self.cone_weight <= 1.0:
-            bad("cone_weight", "must be in [0, 1]")
+        self.check_meshlets_and_levels()
         if not 2 <= self.group_size <= 64:
-            bad("group_size", "must be in 2..64")
-        if not 0.05 <= self.ratio <= 0.9:
-            bad("ratio", "must be in [0.05, 0.9]")
-        if not self.ratio < self.stall < 1.0:
-            bad("stall", "must be above ratio and below 1")
-        if not 1 <= self.max_levels <= 64:
-            bad("max_levels", "must be in 1..64")
+            self.bad("group_size", "must be in 2..64")
         return self
 
 
