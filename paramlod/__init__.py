@@ -7,7 +7,7 @@ from paramlod.errors import CapacityError, DeviceError, FunctionError, ParamlodE
 from paramlod.function.define import ParametricFunction, Part, evaluate, parametric
 from paramlod.function.registry import register_builder
 from paramlod.lod.stage import LodSettings
-from paramlod.meshlod import MeshLod, MeshSettings, load_mesh
+from paramlod.meshlod import MeshLod, MeshSettings, SkinnedMesh, load_mesh, load_skinned
 from paramlod.pipeline.driver import render, render_on_device
 from paramlod.pipeline.settings import RenderSettings
 from paramlod.renderers.points_lfb import SsaaSettings
@@ -15,11 +15,12 @@ from paramlod.renderers.registry import variants
 from paramlod.renderers.sampling import PointSettings
 from paramlod.renderers.tess import TessSettings
 from paramlod.scene.scene import Material, Scene
+from paramlod.viewer.notebook import show
 
 __all__ = [
     "CapacityError", "DeviceError", "FunctionError", "ParamlodError", "SceneError",
     "ParametricFunction", "Part", "dsl", "evaluate", "parametric", "Camera", "Material", "Scene",
     "matrix", "rotate", "scale", "translate", "Frame", "FrameStats", "LodSettings", "PointSettings",
     "SsaaSettings", "TessSettings", "RenderSettings", "render", "render_on_device", "variants",
-    "MeshLod", "MeshSettings", "load_mesh", "register_builder",
+    "MeshLod", "MeshSettings", "load_mesh", "SkinnedMesh", "load_skinned", "register_builder", "show",
 ]

@@ -1,4 +1,4 @@
-"""Command line: ``paramlod render | info | functions | bench | bench-scale | gallery | surfels | mesh | glyphs``."""
+"""Command line: ``paramlod render | view | info | functions | bench | bench-scale | gallery | surfels | mesh | glyphs``."""
 from __future__ import annotations
 
 import argparse
@@ -9,13 +9,14 @@ import sys
 from pathlib import Path
 
 from paramlod.app import dist, gallery, glyphs, mesh_cmd, scenefile, surfels_cmd
-from paramlod.app.args import Parser, add_size, add_stats, check_outputs, progress, run_reporting_errors, write_all_or_none
+from paramlod.app.args import Parser, add_size, add_stats, check_outputs, positive_int, progress, run_reporting_errors, write_all_or_none
 from paramlod.app.bench import run as bench
 from paramlod.device import context as device_context
 from paramlod.core.files import write_atomically
 from paramlod.errors import ParamlodError
 from paramlod.function import registry
 from paramlod.pipeline.driver import render
+from paramlod.viewer import app as viewer_app
 
 
 def _render_job_requested(args) -> bool:
@@ -84,6 +85,14 @@ def cmd_render_job(args) -> int:
     return 0
 
 
+def cmd_view(args) -> int:
+    """The interactive viewer (docs/viewer.md); headless with --script/--record/--frames and no display."""
+    return viewer_app.view(args.source, size=args.size, variant=args.variant, aa=args.aa, script=args.script,
+                           record=args.record, frames=args.frames, video=args.video,
+                           headless=True if args.headless else None, vsync=not args.no_vsync,
+                           overwrite=args.overwrite)
+
+
 def cmd_info(args) -> int:
     print("OpenCL")
     print("  " + device_context.all_cl_devices_summary().replace("\n", "\n  "))
@@ -149,6 +158,22 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     dist.add_job_options(r)
     r.set_defaults(func=cmd_render)
+
+    v = sub.add_parser("view", help="an interactive window: fly through a scene, a plugin file or a function, "
+                                     "reloaded when its files change (docs/viewer.md)")
+    v.add_argument("source", help="a scene file (.toml), a plugin file (.py) or a function name (see `paramlod functions`)")
+    add_size(v, what="window size (default: the scene camera's, or 1280x720)")
+    v.add_argument("--variant", help="render variant to start with (V cycles them)")
+    v.add_argument("--aa", help="anti-aliasing mode to start with, e.g. 4xSS (B cycles them)")
+    v.add_argument("--script", metavar="FILE", help="play a TOML script of camera keyframes and key events")
+    v.add_argument("--record", metavar="DIR", help="write every frame to DIR/frame_00000.png ... (atomically)")
+    v.add_argument("--frames", type=positive_int, metavar="N", help="stop after N frames (default: the script's, "
+                                                                    "or until the window closes)")
+    v.add_argument("--video", metavar="FILE", help="with --record: assemble the frames into FILE (.gif or .mp4)")
+    v.add_argument("--headless", action="store_true", help="no window: draw through EGL (with --script/--record)")
+    v.add_argument("--no-vsync", action="store_true", help="do not wait for the display (measuring)")
+    v.add_argument("--overwrite", action="store_true", help="--record may replace frames already in DIR")
+    v.set_defaults(func=cmd_view)
 
     i = sub.add_parser("info", help="print the OpenCL and OpenGL devices and their capabilities")
     i.set_defaults(func=cmd_info)

@@ -36,8 +36,9 @@ CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches", "patch_budget",
                "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "translate", "rotate", "scale", "matrix", "variant",
-               "instances", "sh_field", "surfels", "mesh", "lod"}
-SOURCE_KEYS = ("function", "mesh", "surfels", "sh_field")   # what an object is made of: one of them
+               "instances", "sh_field", "surfels", "mesh", "lod", "skinned", "animation", "time"}
+SOURCE_KEYS = ("function", "mesh", "surfels", "sh_field")   # what an object is made of: one of them (or skinned)
+SKINNED_KEYS = ("animation", "time")   # only with skinned = "x.glb"
 MESH_LODS = ("dag", "full", "chain")
 ANIMATION_KEYS = {"frames", "t0", "t1", "fps"}
 TRUST_ENV = "PARAMLOD_TRUST_SCENE"   # "1": scene files may import and run any module:function (a builder)
@@ -195,9 +196,12 @@ def load_scene(path, size=None) -> SceneFile:
         if len(sources) > 1:
             ck.fail(f"{where}.{sources[1]}", f"an object is one of {', '.join(SOURCE_KEYS)}; it has both "
                     f"{sources[0]} and {sources[1]}", "objects", i, sources[1])
-        if not {"sh_field", "surfels", "mesh"} & set(o) and ("function" not in o or not isinstance(o["function"], str)):
+        if "skinned" in o and sources:
+            ck.fail(f"{where}.skinned", f"a skinned mesh is an object of its own; this one has {sources[0]} too",
+                    "objects", i, "skinned")
+        if not {"sh_field", "surfels", "mesh", "skinned"} & set(o) and ("function" not in o or not isinstance(o["function"], str)):
             ck.fail(f"{where}.function", "is required (a function name, see `paramlod functions`; "
-                    "or mesh = \"file.ply\")", "objects", i)
+                    "or mesh = \"file.ply\", or skinned = \"file.glb\")", "objects", i)
         params = o.get("params", {})
         if not isinstance(params, dict):
             ck.fail(f"{where}.params", "must be a table of name = value", "objects", i, "params")
@@ -205,12 +209,18 @@ def load_scene(path, size=None) -> SceneFile:
             if not _is_param_value(value):
                 ck.fail(f"{where}.params.{name}", f"must be a number or a list of numbers, got {value!r}",
                         "objects", i, "params")
+        if "skinned" in o:
+            _check_skinned_keys(o, ck, where, i)
+        else:
+            for k in SKINNED_KEYS:
+                if k in o:
+                    ck.fail(f"{where}.{k}", 'is for skinned meshes (skinned = "file.glb")', "objects", i, k)
         if "mesh" in o:
             _check_mesh_keys(o, ck, where, i)
         elif "lod" in o:
             ck.fail(f"{where}.lod", "is for mesh objects (mesh = \"file.ply\")", "objects", i, "lod")
         ov = o.get("variant")
-        if ov is not None and "mesh" in o:
+        if ov is not None and {"mesh", "skinned"} & set(o):
             MESH_VARIANTS = variants("mesh")
             if not (isinstance(ov, str) and ov.partition(":")[0] in MESH_VARIANTS):
                 ck.fail(f"{where}.variant", f"unknown variant {ov!r} for a mesh (available: "
@@ -225,6 +235,8 @@ def load_scene(path, size=None) -> SceneFile:
                            specular=ck.num(o, "specular", where, "objects", i, default=0.25, lo=0, hi=1))
             if "mesh" in o:
                 _add_mesh(scene, o, path, m, mat, ck, where, i)
+            elif "skinned" in o:
+                _add_skinned(scene, o, path, m, mat)
             elif "surfels" in o:
                 _add_surfels(scene, o["surfels"], path, m, mat, ck, where, i, has_color="color" in o)
             elif "sh_field" in o:
@@ -233,12 +245,14 @@ def load_scene(path, size=None) -> SceneFile:
                 _add_instances(scene, o, params, path, m, mat, ck, where, i)
             else:
                 scene.add(o["function"], params=params, transform=m, material=mat)
-            if ov is not None and not {"surfels", "mesh"} & set(o):   # the object's own renderer and AA mode
+            if ov is not None and not {"surfels", "mesh", "skinned"} & set(o):   # the object's own renderer and AA mode
                 obj = scene.objects[-1]
                 obj.variant, _, aa = ov.partition(":")
                 obj.aa = aa or None
         except MeshError as exc:   # the mesh file: its message names it
-            ck.fail(f"{where}.mesh", str(exc), "objects", i, "mesh")
+            key = "animation" if "skinned" in o and "animation" in str(exc) and "animation" in o else \
+                ("skinned" if "skinned" in o else "mesh")
+            ck.fail(f"{where}.{key}", str(exc), "objects", i, key)
         except SceneError as exc:
             if str(exc).startswith(str(path)):
                 raise
@@ -248,7 +262,7 @@ def load_scene(path, size=None) -> SceneFile:
             ck.fail(f"{where}.{key}", str(exc), "objects", i, key)
     camera = _camera(cam_d, size, scene, ck)
     mesh_default = KINDS["mesh"].variant_for(variant) if "mesh" in KINDS else "meshlets"   # what draws a mesh here
-    per = [o.get("variant", mesh_default if "mesh" in o else variant) for o in objects]
+    per = [o.get("variant", mesh_default if {"mesh", "skinned"} & set(o) else variant) for o in objects]
     mixed = per if any("variant" in o for o in objects) and len(set(per)) > 1 else None
     if mixed is None and any("variant" in o for o in objects):
         variant = per[0]
@@ -392,6 +406,31 @@ def _check_mesh_keys(o, ck, where, i):
     if o.get("lod", "dag") not in MESH_LODS:
         ck.fail(f"{where}.lod", f"must be one of {', '.join(map(repr, MESH_LODS))} (\"dag\": level of detail "
                 f"per frame, \"full\": every triangle, \"chain\": one whole-mesh level per frame), got {o['lod']!r}", "objects", i, "lod")
+
+
+def _check_skinned_keys(o, ck, where, i):
+    if not isinstance(o["skinned"], str) or not o["skinned"].strip():
+        ck.fail(f"{where}.skinned", f'must be a glTF/GLB file name such as "worm.glb" (relative to the scene file), '
+                f"got {o['skinned']!r}", "objects", i, "skinned")
+    for k in ("params", "lod", "instances"):
+        if k in o:
+            ck.fail(f"{where}.{k}", "a skinned mesh takes no " + k + " (every meshlet is drawn at full detail, once)",
+                    "objects", i, k)
+    a = o.get("animation")
+    if a is not None and (isinstance(a, bool) or not isinstance(a, (str, int)) or (isinstance(a, int) and a < 0)):
+        ck.fail(f"{where}.animation", f"must be the animation's name or index (>= 0), got {a!r}", "objects", i, "animation")
+    if "time" in o:
+        ck.num(o, "time", where, "objects", i)
+
+
+def _add_skinned(scene, o, path, m, mat):
+    """``skinned = "x.glb"`` (relative to the scene file), optionally ``animation`` (name or index;
+    default the first), ``time`` (seconds; default: the scene's time, e.g. ``--time``) and
+    ``variant = "meshlets"`` or ``"meshlets-gl:<AA mode>"``."""
+    file = (path.parent / o["skinned"]).resolve()
+    variant, _, aa = o["variant"].partition(":") if "variant" in o else (None, "", "")
+    scene.add_skinned_mesh(file, animation=o.get("animation"), time=o.get("time"), transform=m, material=mat,
+                           variant=variant, aa=aa or None)
 
 
 def _add_mesh(scene, o, path, m, mat, ck, where, i):

@@ -18,10 +18,17 @@ contiguous, so the cut runs once per batch over (its mesh's clusters) x (its ins
 ``handoffs`` lists (instance index, SurfelObject) for the meshes that take over from a surfel
 object (paramlod.scene.handoff); ``weights(camera)`` gives every instance's share of its pixels
 for a frame (1 without a hand-off), which ``DeviceMeshes.set_weights`` sends to the device.
+
+Skinned meshes (paramlod.meshlod.skinned.SkinnedMesh) are packed like the others, their bind pose
+as the vertices; ``SkinArrays`` adds what the skinning kernel (paramlod.meshlod.skin) reads: the
+bind pose again (the vertex buffers are overwritten by each frame's pose), joints offset into the
+scene's concatenated skin matrices, weights, and one ``SkinSlot`` per skinned mesh. The device's
+vertex and normal buffers are then writable.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import copy
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -30,6 +37,7 @@ import pyopencl as cl
 from paramlod.core.layouts import CLUSTER, INSTANCE_F, INSTANCE_U, MATERIAL
 from paramlod.device.context import cl_device
 from paramlod.errors import MeshError, SceneError
+from paramlod.meshlod.skinned import SkinnedMesh
 from paramlod.scene.handoff import mesh_weight
 
 SIMILAR, MIRRORED = 1, 2   # MeshInstances.inst_u flags
@@ -89,9 +97,11 @@ class MeshInstances:
 
     @classmethod
     def pack(cls, objects, mesh_index) -> "MeshInstances":
-        """``objects``: MeshObjects (paramlod.scene.scene); ``mesh_index(mesh) -> int``."""
+        """``objects``: MeshObjects (paramlod.scene.scene); ``mesh_index(mesh) -> int``, called once per
+        object in order (a skinned object's index is its own, not its mesh's)."""
         fs, us, ms, ss, batches, handoffs, at = [], [], [], [], [], [], 0
         for o in objects:
+            mi = mesh_index(o.mesh)
             if getattr(o, "handoff", None) is not None:
                 handoffs.append((at, o.handoff))
             models = np.broadcast_to(o.transform, (o.count, 4, 4)) if o.transforms is None else o.transform @ o.transforms
@@ -105,7 +115,7 @@ class MeshInstances:
             nrm = np.transpose(np.linalg.inv(lin), (0, 2, 1))
             f[:, INSTANCE_F.slice("normal")] = np.concatenate([nrm, np.zeros((n, 3, 1))], axis=2).reshape(n, 12)
             u = np.zeros((n, INSTANCE_U.length), np.uint32)
-            u[:, INSTANCE_U.offset("func")] = mesh_index(o.mesh)
+            u[:, INSTANCE_U.offset("func")] = mi
             u[:, INSTANCE_U.offset("object")] = o.object_id
             sv = np.linalg.svd(lin, compute_uv=False)
             u[:, INSTANCE_U.offset("flags")] = (np.where(sv[:, 2] >= sv[:, 0] * (1 - 1e-4), SIMILAR, 0)
@@ -117,7 +127,7 @@ class MeshInstances:
             us.append(u)
             ms.append(mat)
             ss.append(sv[:, 0].astype(np.float32))
-            batches.append((mesh_index(o.mesh), at, n))
+            batches.append((mi, at, n))
             at += n
         return cls(np.concatenate(fs or [np.zeros((0, INSTANCE_F.length), np.float32)]),
                    np.concatenate(us or [np.zeros((0, INSTANCE_U.length), np.uint32)]),
@@ -136,6 +146,59 @@ class MeshInstances:
         return w
 
 
+@dataclass
+class SkinSlot:
+    """One skinned mesh of a MeshArrays: mesh ``index``, its vertices [dst_first, dst_first + count)
+    of the packed vertices, its bind pose at src_first in SkinArrays, its joints at joint_first."""
+    mesh: SkinnedMesh
+    index: int
+    dst_first: int
+    src_first: int
+    count: int
+    joint_first: int
+    n_joints: int
+
+
+@dataclass
+class SkinArrays:
+    bind_v: np.ndarray    # float32 [Vs, 4] bind-pose positions (w = 1)
+    bind_n: np.ndarray    # float32 [Vs, 4] bind-pose normals (w = 0)
+    joints: np.ndarray    # uint32 [Vs, 4] into the concatenated skin matrices
+    weights: np.ndarray   # float32 [Vs, 4]
+    slots: list           # SkinSlot per skinned mesh, in mesh order
+    n_joints: int
+
+    @classmethod
+    def pack(cls, arrays: MeshArrays) -> "SkinArrays":
+        vs, ns, js, ws, slots = [], [], [], [], []
+        dst = src = jb = 0
+        for i, m in enumerate(arrays.meshes):
+            if isinstance(m, SkinnedMesh):
+                n = len(m.vertices)
+                vs.append(arrays.vertices[dst:dst + n])
+                ns.append(arrays.normals[dst:dst + n])
+                js.append(m.joints.astype(np.uint32) + np.uint32(jb))
+                ws.append(m.weights.astype(np.float32))
+                nj = len(m.rig.joint_nodes)
+                slots.append(SkinSlot(m, i, dst, src, n, jb, nj))
+                src += n
+                jb += nj
+            dst += len(m.vertices)
+        if not slots:
+            z4 = np.zeros((0, 4), np.float32)
+            return cls(z4, z4, np.zeros((0, 4), np.uint32), z4, [], 0)
+        return cls(np.concatenate(vs), np.concatenate(ns), np.concatenate(js), np.concatenate(ws), slots, jb)
+
+    @property
+    def mesh_indices(self) -> set:
+        return {s.index for s in self.slots}
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.bind_v.nbytes + self.bind_n.nbytes + self.joints.nbytes + self.weights.nbytes
+                   + self.n_joints * 64)
+
+
 class DeviceMeshes:
     """Device copies of a MeshArrays and a MeshInstances (OpenCL buffers, read-only)."""
 
@@ -148,7 +211,16 @@ class DeviceMeshes:
             return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a if a.nbytes else np.zeros(4, np.uint32))
 
         self.arrays, self.instances = arrays, instances
-        self.vertices, self.normals = up(arrays.vertices), up(arrays.normals)
+        self.skin = SkinArrays.pack(arrays)
+        if self.skin.slots:   # the skinning kernel writes each frame's pose into them
+            self.vertices = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(arrays.vertices))
+            self.normals = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(arrays.normals))
+        else:
+            self.vertices, self.normals = up(arrays.vertices), up(arrays.normals)
+        sk = self.skin
+        self.bind_v, self.bind_n = up(sk.bind_v), up(sk.bind_n)
+        self.joints, self.joint_weights = up(sk.joints), up(sk.weights)
+        self.skin_matrices = cl.Buffer(ctx, mf.READ_ONLY, max(sk.n_joints, 1) * 64)
         self.triangles, self.clusters = up(arrays.triangles), up(arrays.clusters)
         self.inst_f, self.inst_u = up(instances.inst_f), up(instances.inst_u)
         self.materials, self.scales = up(instances.materials), up(instances.scales)
@@ -171,8 +243,17 @@ class DeviceMeshes:
         self._weights_host = w.copy()
         cl.enqueue_copy(cl_device().queue, self.weights, self._weights_host, is_blocking=False)
 
+    def only(self, skinned: bool) -> "DeviceMeshes":
+        """A view of these buffers whose instances keep only the batches of skinned meshes
+        (``skinned``) or of the others, for the cut that suits them (no copy of device data)."""
+        idx = self.skin.mesh_indices
+        view = copy.copy(self)
+        view.instances = replace(self.instances, batches=[b for b in self.instances.batches
+                                                          if (b[0] in idx) == bool(skinned)])
+        return view
+
     @property
     def nbytes(self) -> int:
         i = self.instances
-        return self.arrays.nbytes + int(i.inst_f.nbytes + i.inst_u.nbytes + i.materials.nbytes + i.scales.nbytes
+        return self.arrays.nbytes + self.skin.nbytes + int(i.inst_f.nbytes + i.inst_u.nbytes + i.materials.nbytes + i.scales.nbytes
                                         + self._weights_host.nbytes)

@@ -124,6 +124,20 @@ class MeshDraw:
         self._index_first = (3 * arrays.clusters["first"]).astype(np.uint32)
         self.arrays, self.instances = arrays, instances
 
+    def write_vertices(self, first: int, vertices: np.ndarray, normals: np.ndarray) -> None:
+        """Overwrite vertices [first, first + n) of the uploaded meshes (float32 [n, 4] each): a
+        skinned mesh's pose of this frame (paramlod.meshlod.skin)."""
+        if self.arrays is None:
+            raise MeshError("MeshDraw.write_vertices before upload")
+        v = np.ascontiguousarray(vertices, np.float32)
+        n = np.ascontiguousarray(normals, np.float32)
+        if v.shape != n.shape or v.ndim != 2 or v.shape[1] != 4 or not 0 <= first <= len(self.arrays.vertices) - len(v):
+            raise MeshError(f"MeshDraw.write_vertices: {v.shape} vertices at {first} do not fit the "
+                            f"{len(self.arrays.vertices)} uploaded")
+        if len(v):
+            self._vertices.write(v.tobytes(), offset=16 * int(first))
+            self._normals.write(n.tobytes(), offset=16 * int(first))
+
     def _release_static(self):
         for vao in self._vaos.values():
             vao.release()

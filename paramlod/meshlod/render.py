@@ -11,6 +11,15 @@
 The threshold is in pixels of the target drawn into: with supersampling, in subsamples, as the
 parametric objects' LOD is (a cluster's error then stays below one subsample).
 
+Skinned meshes (paramlod.meshlod.skinned, ``Scene.add_skinned_mesh``) are meshes of this kind:
+each frame the skinning kernel (paramlod.meshlod.skin) writes every skinned object's pose at its
+time (its own, or the scene's) into the shared vertex buffers before the cut; their meshlets have
+no DAG and are cut by the skinned cull (paramlod.meshlod.skin_cull.SkinCull, bounds that hold for
+the whole clip) into the same selection, after the static meshes' cut. For meshlets-gl the posed
+vertices are read back and written into the GL vertex buffers (one skinning implementation, the
+one the twin checks, for both renderers; the cost is 32 bytes per skinned vertex each way per
+frame, measured in docs/skinning.md).
+
 Meshes that take over from surfel objects (paramlod.scene.handoff) get their weights each frame,
 for the camera the surfels are splatted with (the keys pass's; for meshlets-gl, the frame's camera
 at settings.points.supersample, the surfels' pass), uploaded without a wait before the cut: the cut
@@ -18,6 +27,7 @@ skips instances of weight 0, the raster and the GL fragment stage keep the pixel
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,7 +38,10 @@ from paramlod.meshlod.buffers import DeviceMeshes, MeshArrays, MeshInstances
 from paramlod.meshlod.cut import ClusterCut, Selection
 from paramlod.meshlod.draw import MeshDraw
 from paramlod.meshlod.raster import MeshRaster
-from paramlod.meshlod.source import load_mesh
+from paramlod.meshlod.skin import Skinning, pose_records, read_vertices
+from paramlod.meshlod.skin_cull import SkinCull
+from paramlod.meshlod.skinned import SkinnedMesh, skinned_source
+from paramlod.meshlod.source import load_mesh, skinned_bounds
 from paramlod.renderers.registry import ObjectKind, RendererSpec, register_kind, register_renderer
 from paramlod.renderers.shading import LIGHT
 from paramlod.scene.loaders import register_loader
@@ -61,40 +74,100 @@ class _MeshUploads:
 
     def __init__(self):
         self._version, self.dev = None, None
+        self.skinned: list = []   # the skinned objects, in their slots' order
 
     def update(self, scene) -> DeviceMeshes:
         if scene._version != self._version:
-            index: dict[int, int] = {}
-            meshes = []
+            index: dict = {}
+            meshes, objects, skinned = [], [], []
             for o in scene.meshes:
-                if id(o.mesh) not in index:
-                    index[id(o.mesh)] = len(meshes)
+                # a skinned object has a pose of its own: its own copy of the vertices
+                key = ("object", id(o)) if isinstance(o.mesh, SkinnedMesh) else id(o.mesh)
+                if key not in index:
+                    index[key] = len(meshes)
                     meshes.append(o.mesh)
+                    if isinstance(o.mesh, SkinnedMesh):
+                        skinned.append(o)
+                objects.append(key)
+            keys = iter(objects)
             arrays = MeshArrays.pack(meshes)
-            instances = MeshInstances.pack(scene.meshes, lambda m: index[id(m)])
+            instances = MeshInstances.pack(scene.meshes, lambda m: index[next(keys)])
             self.dev = DeviceMeshes(arrays, instances)
+            self.skinned = skinned   # in slot order (mesh order)
             self._version = scene._version
         return self.dev
+
+    def times(self, scene) -> list:
+        """The pose time of each skinned slot: its object's own, or the scene's."""
+        return [scene.time if getattr(o, "time", None) is None else o.time for o in self.skinned]
+
+
+class _Cuts:
+    """The cut of the static meshes (ClusterCut) and of the skinned ones (SkinCull with their
+    bounds over the clip; every meshlet when culling is off), into one selection; and the
+    skinning before them."""
+
+    def __init__(self):
+        self.cut, self.skinning = ClusterCut(), Skinning()
+        self.skin_cull, self._cull_dev = None, None
+        self.skin_events: list = []
+        self.last_cull = None   # how the last frame cut the skinned meshes: "skin_cull", "none"
+
+    def pose(self, dev, times) -> list:
+        self.skin_events = self.skinning.enqueue(dev, pose_records(dev, times)) if dev.skin.slots else []
+        return self.skin_events
+
+    def enqueue(self, dev, camera, s, selection) -> list:
+        if not dev.skin.slots:
+            self.last_cull = None
+            return self.cut.enqueue(dev, camera, s.threshold_px, selection, cull_frustum=s.cull_frustum,
+                                    cull_backface=s.cull_backface)
+        events = self.cut.enqueue(dev.only(False), camera, s.threshold_px, selection, cull_frustum=s.cull_frustum,
+                                  cull_backface=s.cull_backface)
+        if s.cull_frustum or s.cull_backface:
+            events += self._culler(dev).enqueue(dev.skin_matrices, camera, selection, cull_frustum=s.cull_frustum,
+                                                cull_backface=s.cull_backface, reset=False)
+            self.last_cull = "skin_cull"
+        else:
+            # no culling: every meshlet (a skinned mesh has no DAG: its clusters are all roots of error
+            # 0, so the static cut with its tests off selects them all, with no bounds to build)
+            events += self.cut.enqueue(dev.only(True), camera, s.threshold_px, selection, cull_frustum=False,
+                                       cull_backface=False, reset=False)
+            self.last_cull = "none"
+        return events
+
+    def _culler(self, dev) -> SkinCull:
+        if self._cull_dev is not dev:
+            for slot in dev.skin.slots:   # offline, once per mesh (and cached on disk between runs)
+                if slot.mesh.bounds is None:
+                    slot.mesh.bounds = skinned_bounds(slot.mesh)
+            self.skin_cull = SkinCull(dev, [slot.mesh.bounds for slot in dev.skin.slots])
+            self._cull_dev = dev
+        return self.skin_cull
+
+    def ms(self) -> float:
+        return sum((e.profile.end - e.profile.start) * 1e-6 for e in self.skin_events)
 
 
 class Meshlets:
     """The "meshlets" renderer's per-scene state: uploads, the cut's selection, the rasterizer."""
 
     def __init__(self, functions=(), record: bool = False):
-        self.uploads, self.cut, self.raster = _MeshUploads(), ClusterCut(), MeshRaster()
+        self.uploads, self.cuts, self.raster = _MeshUploads(), _Cuts(), MeshRaster()
         self.selection = Selection()
-        self.camera, self.weights = None, None
+        self.camera, self.weights, self.times = None, None, []
 
     def prepare(self, scene, camera, settings):
         settings.mesh.validate()
         self.dev, self.camera = self.uploads.update(scene), camera
+        self.times = self.uploads.times(scene)
 
     def enqueue(self, target, settings):
         s = settings.mesh
         # here, not in prepare: a redrawn frame sees the surfel strategies as they are now
         self.weights = _weights(self.dev, self.camera)
-        self._cut = self.cut.enqueue(self.dev, self.camera, s.threshold_px, self.selection,
-                                     cull_frustum=s.cull_frustum, cull_backface=s.cull_backface)
+        self.cuts.pose(self.dev, self.times)
+        self._cut = self.cuts.enqueue(self.dev, self.camera, s, self.selection)
         sel = self.selection
         self.raster.enqueue(target, self.camera, self.dev, sel.pairs, sel.capacity, sel.counters, LIGHT,
                             COLOR_BY[s.color_by])
@@ -107,16 +180,17 @@ class Meshlets:
         return any([self.selection.grow(), self.raster.grow()])
 
     def stats(self) -> dict:
-        return _mesh_stats(self.selection, self._cut, self.raster.stats(), self.dev, self.weights)
+        return _mesh_stats(self.selection, self._cut, self.raster.stats(), self.dev, self.weights, self.cuts)
 
 
 class MeshletsGL:
     """The "meshlets-gl" renderer's per-scene state: the OpenCL cut and the OpenGL draw."""
 
     def __init__(self, functions=(), record: bool = False):
-        self.uploads, self.cut, self.draw = _MeshUploads(), ClusterCut(), MeshDraw()
+        self.uploads, self.cuts, self.draw = _MeshUploads(), _Cuts(), MeshDraw()
         self.selection = Selection()
         self._drawn_version = None
+        self.times = []
 
     def prepare(self, scene, camera, settings):
         settings.mesh.validate()
@@ -124,25 +198,33 @@ class MeshletsGL:
         if self.uploads._version != self._drawn_version:
             self.draw.upload(self.dev.arrays, self.dev.instances)
             self._drawn_version = self.uploads._version
+        self.times = self.uploads.times(scene)
 
     def enqueue(self, camera, settings):
         s = settings.mesh
         ss = settings.points.supersample   # the surfels' keys pass: its camera gives the weights
         weights = _weights(self.dev, camera if ss == 1 else camera.with_size((camera.width * ss, camera.height * ss)))
+        self.cuts.pose(self.dev, self.times)
         while True:
-            events = self.cut.enqueue(self.dev, camera, s.threshold_px, self.selection,
-                                      cull_frustum=s.cull_frustum, cull_backface=s.cull_backface)
+            events = self.cuts.enqueue(self.dev, camera, s, self.selection)
             self.selection.collect()
             cl_device().queue.finish()
             if not self.selection.grow():
                 break
+        t0 = time.perf_counter()
+        for slot in self.dev.skin.slots:   # the GL draw reads the pose the skinning wrote
+            v, n = read_vertices(self.dev, slot.dst_first, slot.count)
+            self.draw.write_vertices(slot.dst_first, v, n)
+        pose_copy_ms = (time.perf_counter() - t0) * 1e3
         pairs = self.selection.read_pairs(self.selection.counts()["selected"])   # the counters the loop collected
         frame = self.draw.draw(pairs, camera, settings.tess.aa, COLOR_BY[s.color_by], LIGHT, self.background,
                                weights=weights)
-        stats = _mesh_stats(self.selection, events, {}, self.dev, weights)
+        stats = _mesh_stats(self.selection, events, {}, self.dev, weights, self.cuts)
         ms = frame.stats["ms"]
         frame.stats.update({k: v for k, v in stats.items() if k != "ms"}, variant="meshlets-gl")
         frame.stats["ms"] = {**ms, "cut": stats["ms"]["cut"], "render": ms.get("draw", 0.0)}
+        if self.dev.skin.slots:   # the skinning's device time, and the pose's CL -> host -> GL copy
+            frame.stats["ms"].update(skin=stats["ms"]["skin"], pose_copy=pose_copy_ms)
         return frame
 
     def collect(self):
@@ -165,7 +247,7 @@ def _weights(dev, camera):
     return w
 
 
-def _mesh_stats(selection, cut_events, raster: dict, dev, weights=None) -> dict:
+def _mesh_stats(selection, cut_events, raster: dict, dev, weights=None, cuts=None) -> dict:
     c = selection.counts()
     ms = sum((e.profile.end - e.profile.start) * 1e-6 for e in cut_events)
     out = {"clusters_drawn": c["selected"], "triangles_drawn": c["triangles"],
@@ -178,6 +260,12 @@ def _mesh_stats(selection, cut_events, raster: dict, dev, weights=None) -> dict:
     out["ms"] = {"cut": ms, **raster_ms}
     if raster_ms:
         out["ms"]["render"] = sum(raster_ms.values())
+    if dev.skin.slots:
+        out["skinned_objects"] = len(dev.skin.slots)
+        out["skinned_vertices"] = int(sum(sl.count for sl in dev.skin.slots))
+        out["ms"]["skin"] = cuts.ms() if cuts is not None else 0.0
+        if cuts is not None:
+            out["skin_cull"] = cuts.last_cull   # "skin_cull" (the clip's bounds) or "none" (culling off)
     return out
 
 
@@ -189,3 +277,4 @@ register_renderer(RendererSpec("meshlets-gl", "mesh", MeshletsGL, "mesh", "gl", 
                                "the same cut drawn by OpenGL (one indirect draw per cluster), MSAA/SSAA",
                                takes_aa="all"))
 register_loader("mesh", load_mesh)
+register_loader("skinned", skinned_source)

@@ -5,16 +5,33 @@ and by ``paramlod mesh``. Reading and validating files and arrays is paramlod.sc
 (read_mesh); building is paramlod.meshlod.build.dag's (lod "dag", "full") and
 paramlod.meshlod.build.chain's (lod "chain"); the file and the cache are paramlod.meshlod.format's.
 No twin (host only).
+
+Also the skinned meshes' offline bounds, ``skinned_bounds(mesh)`` (paramlod.meshlod.build.skin_bounds),
+cached in the same folder (``<key>.skinbounds.npz``): a full-size mesh's bounds take minutes on a
+CPU, so the mesh renderers, the gallery and the bench reuse them across runs. The key covers every
+array of the mesh and its rig (the whole clip), the settings and the text of the bounds' module, so
+a changed method builds them again.
 """
 from __future__ import annotations
 
+import hashlib
+import io
+import json
 import os
+import warnings
+from dataclasses import fields
 from pathlib import Path
 
-from paramlod.errors import MeshError
+import numpy as np
+
+from paramlod.core.files import write_atomically
+from paramlod.errors import MeshError, ParamlodError
+from paramlod.meshlod.build import skin_bounds as _bounds_module
+from paramlod.meshlod.build.skin_bounds import SkinBounds, SkinBoundsSettings, skin_bounds
 from paramlod.meshlod.build.chain import ChainSettings, build_chain
 from paramlod.meshlod.build.dag import BuildSettings, build_dag
-from paramlod.meshlod.format import LODS, SUFFIX, MeshLod, cache_key, cache_load, cache_store, load_meshlod
+from paramlod.meshlod.format import LODS, SUFFIX, MeshLod, cache_dir, cache_key, cache_load, cache_store, load_meshlod
+from paramlod.meshlod.skinned import SkinnedMesh
 from paramlod.scene.meshes import read_mesh, source_label
 
 
@@ -69,3 +86,61 @@ def load_mesh(source, lod: str = "dag", settings=None, cache: bool = True, progr
     if cache:
         cache_store(built, key)
     return built
+
+
+# --- skinned meshes' bounds -------------------------------------------------------------------------
+BOUNDS_SUFFIX = ".skinbounds.npz"
+
+
+def _bounds_key(mesh: SkinnedMesh, settings: SkinBoundsSettings) -> str:
+    h = hashlib.sha256()
+    rig = mesh.rig
+    for a in (mesh.vertices, mesh.normals, mesh.triangles, mesh.joints, mesh.weights, mesh.clusters, rig.parents,
+              rig.joint_nodes, rig.inverse_bind, rig.root, *rig.rest):
+        a = np.ascontiguousarray(a)
+        h.update(str((a.dtype.str, a.shape)).encode())
+        h.update(a.tobytes())
+    for c in rig.channels:
+        h.update(f"{c.node}/{c.path}/{c.interpolation}".encode())
+        h.update(np.ascontiguousarray(c.times).tobytes())
+        h.update(np.ascontiguousarray(c.values).tobytes())
+    h.update(json.dumps(settings.as_dict(), sort_keys=True).encode())
+    h.update(Path(_bounds_module.__file__).read_bytes())   # a changed method: new bounds
+    return h.hexdigest()[:40]
+
+
+def skinned_bounds(mesh: SkinnedMesh, settings: SkinBoundsSettings | None = None, cache: bool = True,
+                   progress=None) -> SkinBounds:
+    """The meshlets' conservative bounds over ``mesh``'s clip (skin_bounds), from the cache when it
+    holds them; built and stored otherwise (a warning, not an error, when the cache cannot be
+    read or written)."""
+    if not isinstance(mesh, SkinnedMesh):
+        raise MeshError(f"skinned_bounds needs a SkinnedMesh, got {type(mesh).__name__}")
+    s = SkinBoundsSettings() if settings is None else settings
+    path = cache_dir() / f"{_bounds_key(mesh, s)}{BOUNDS_SUFFIX}" if cache else None
+    if path is not None and path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                names = {f.name for f in fields(SkinBounds)}
+                if set(z.files) != names:
+                    raise ValueError(f"fields {sorted(z.files)}, expected {sorted(names)}")
+                d = {k: z[k] for k in names}
+            d["radius_scale"] = float(d["radius_scale"])
+            d["stats"] = json.loads(str(d["stats"]))
+            return SkinBounds(**d)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            warnings.warn(f"skin bounds cache: {path} is unreadable ({exc}); building them again",
+                          RuntimeWarning, stacklevel=2)
+    b = skin_bounds(mesh, s, progress=progress)
+    if path is not None:
+        d = {f.name: getattr(b, f.name) for f in fields(SkinBounds)}
+        d["stats"] = np.array(json.dumps(d["stats"], default=float))
+        buf = io.BytesIO()
+        np.savez(buf, **d)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_atomically(path, lambda tmp: Path(tmp).write_bytes(buf.getvalue()))
+        except (OSError, ParamlodError) as exc:
+            warnings.warn(f"skin bounds cache: cannot write {path} ({exc}); the bounds are not cached",
+                          RuntimeWarning, stacklevel=2)
+    return b

@@ -1,5 +1,5 @@
 """File kinds -> scene objects, registered by the subsystems that read them (the surfel room
-registers "surfels", the mesh-LOD room "mesh"), so the scene room needs none of them."""
+registers "surfels", the mesh-LOD room "mesh" and "skinned"), so the scene room needs none of them."""
 from __future__ import annotations
 
 from typing import Callable
@@ -8,7 +8,7 @@ from paramlod.errors import SceneError
 
 LOADERS: dict[str, Callable] = {}
 # The package that registers each known kind, for the message when it has not been imported.
-PROVIDERS = {"surfels": "paramlod.surfels", "mesh": "paramlod.meshlod"}
+PROVIDERS = {"surfels": "paramlod.surfels", "mesh": "paramlod.meshlod", "skinned": "paramlod.meshlod"}
 
 
 def register_loader(kind: str, load: Callable) -> None:

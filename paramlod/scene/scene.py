@@ -103,6 +103,14 @@ class MeshObject:
     handoff: object = field(default=None, repr=False, compare=False)
 
 
+@dataclass
+class SkinnedMeshObject(MeshObject):
+    """A linear-blend-skinned mesh (paramlod.meshlod.skinned.SkinnedMesh) posed at ``time`` (None:
+    the scene's time), drawn by the mesh renderers; made by ``Scene.add_skinned_mesh``."""
+
+    time: float | None = None
+
+
 F32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -277,6 +285,43 @@ class Scene:
                 raise SceneError(f"mesh '{label}': colors must be a [{count}, 3] array of values in [0, 1]")
         obj = MeshObject(self._load_mesh(source, lod), m, material or Material(), self.object_count + 1, count,
                          transforms, colors, variant, aa)
+        self.meshes.append(obj)
+        self.touch()
+        return obj
+
+    def add_skinned_mesh(self, source, animation=None, time=None, transform=None, material: Material | None = None,
+                         variant: str | None = None, aa: str | None = None) -> SkinnedMeshObject:
+        """Add a linear-blend-skinned mesh: a glTF/GLB file with a skin (convert X or FBX files
+        first: ``assimp export in.X out.glb -fglb2``) or a paramlod.meshlod.SkinnedMesh.
+        ``animation``: the clip's name or index (default: the first). ``time``: the pose's time in
+        seconds of the clip (clamped to it); None: the scene's ``time`` drives it, as it drives
+        animated parametric objects. Every meshlet is drawn at full detail (no DAG) and culled with
+        bounds that hold for the whole clip. ``variant`` ("meshlets", "meshlets-gl") and ``aa`` as
+        for add_mesh."""
+        label = source_label(source)
+        _check_names(variant, aa)
+        self._check_room("a skinned mesh takes one object id")
+        if animation is not None and (isinstance(animation, bool) or not isinstance(animation, (str, int, np.integer))):
+            raise SceneError(f"skinned mesh '{label}': animation must be a name or an index, got {animation!r}")
+        if time is not None:
+            if isinstance(time, bool) or not isinstance(time, (int, float, np.integer, np.floating)) \
+                    or not np.isfinite(time):
+                raise SceneError(f"skinned mesh '{label}': time must be a finite number of seconds or None, got {time!r}")
+            time = float(time)
+        if material is not None and not isinstance(material, Material):
+            raise SceneError(f"skinned mesh '{label}': material must be a paramlod.Material, got {type(material).__name__}")
+        try:
+            m = np.eye(4) if transform is None else _as_matrix(transform)
+        except SceneError as exc:
+            raise SceneError(f"skinned mesh '{label}': {exc}") from None
+        if abs(np.linalg.det(m[:3, :3])) < 1e-20:
+            raise SceneError(f"skinned mesh '{label}': the transform is singular (it flattens the mesh); give an invertible one")
+        key = (source_key(source), "skinned", animation if not isinstance(animation, np.integer) else int(animation))
+        hit = self._loaded_meshes.get(key)
+        if hit is None:
+            hit = self._loaded_meshes[key] = (source, load("skinned", source, animation=animation))
+        obj = SkinnedMeshObject(hit[1], m, material or Material(), self.object_count + 1, 1, None, None, variant, aa,
+                                time=time)
         self.meshes.append(obj)
         self.touch()
         return obj

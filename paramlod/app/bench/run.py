@@ -10,7 +10,9 @@ atom_min ceiling, the tessellated triangles/s of a trivial function, the OpenCL 
 throughput of every built-in function, and the blue-surfel sampling and prefix-rendering costs;
 the mesh LOD measurements (extra "meshes", paramlod.app.bench.meshes) and, on request, the mesh-LOD
 evaluation of full mesh / discrete chain / cluster DAG (extra "mesh-eval",
-paramlod.app.bench.mesh_eval). ``--only-extras`` skips the parametric scenarios.
+paramlod.app.bench.mesh_eval) and the skinned giant worm with its culling on and off (extra
+"skinned", paramlod.app.bench.skinned) and the viewer's presenting overhead (extra "viewer",
+paramlod.app.bench.viewer). ``--only-extras`` skips the parametric scenarios.
 Results go to DIR/results.json (written after every measurement), DIR/results.md and plots.
 """
 from __future__ import annotations
@@ -31,6 +33,8 @@ from paramlod.app.args import add_size, check_folder, non_negative_int, positive
 from paramlod.app.bench.mesh_eval import SCENARIOS as EVAL_SCENARIOS, THRESHOLDS as EVAL_THRESHOLDS
 from paramlod.app.bench.mesh_eval import format_mesh_eval, plot_mesh_eval, run_mesh_eval
 from paramlod.app.bench.meshes import format_meshes, run_meshes
+from paramlod.app.bench.skinned import format_skinned, run_skinned
+from paramlod.app.bench.viewer import format_viewer, run_viewer
 from paramlod.app.bench.scenes import DEFAULT, SCENARIOS
 from paramlod.core.camera import Camera
 from paramlod.core.files import write_atomically
@@ -67,8 +71,10 @@ def add_arguments(p):
     p.add_argument("--frames", type=positive_int, default=8, help="timed frames per orbit (default 8)")
     p.add_argument("--warmup", type=non_negative_int, default=2, help="untimed frames before each orbit (default 2)")
     p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels", "meshes"],
-                   choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval"],
-                   help="extra measurements (default all but mesh-eval, the full / chain / DAG evaluation)")
+                   choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval", "skinned", "viewer"],
+                   help="extra measurements (default all but mesh-eval, the full / chain / DAG evaluation, "
+                        "skinned, the rigged giant worm with its conservative culling, and viewer, the "
+                        "interactive viewer's presenting overhead)")
     p.add_argument("--only-extras", action="store_true", help="skip the parametric scenarios: only the extras")
     p.add_argument("--big-mesh", choices=["auto", "yes", "no"], default="auto",
                    help="also measure a 1.6 M-triangle mesh (default: on a GPU only)")
@@ -336,6 +342,12 @@ def run_bench(args) -> int:
         result["meshes"] = run_meshes(size, args.frames, args.warmup, big, args.mesh_grid,
                                       log=lambda m: print(m, flush=True))
         save()
+    if "skinned" in args.extras:
+        result["skinned"] = run_skinned(size, args.frames, args.warmup, log=lambda m: print(m, flush=True))
+        save()
+    if "viewer" in args.extras:
+        result["viewer"] = run_viewer(size, args.frames, args.warmup, log=lambda m: print(m, flush=True))
+        save()
     if "mesh-eval" in args.extras:
         big = args.big_mesh == "yes" or (args.big_mesh == "auto" and dev.is_gpu)
         result["mesh_eval"] = run_mesh_eval(size, args.frames, args.warmup, big, args.mesh_grid, args.eval_thresholds,
@@ -402,6 +414,10 @@ def format_markdown(result) -> str:
         lines += [f"| {r['prefix']:,} | {r['ms']:.3f} |" for r in s["render"]]
     if "meshes" in result:
         lines += format_meshes(result["meshes"], ceil, result.get("tess_ceiling", {}).get("triangles_per_s"))
+    if "skinned" in result:
+        lines += format_skinned(result["skinned"])
+    if "viewer" in result:
+        lines += format_viewer(result["viewer"])
     if "mesh_eval" in result:
         lines += format_mesh_eval(result["mesh_eval"])
     return "\n".join(lines) + "\n"
