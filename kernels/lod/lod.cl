@@ -5,6 +5,23 @@
 // splits the half of the patch it lies in (7 patterns, docs/lod.md). The numpy twin of this
 // kernel is paramlod/lod/reference.py: keep both in step.
 //
+// Boundary lines: the measured lines lie inside the patch (1/8 .. 7/8), so a patch whose screen
+// speed peaks on its own edge would sample that edge too sparsely, and so would its neighbour
+// across it (single-pixel holes along patch boundaries of steep surfaces). Each render patch also
+// gets w_u, w_v (RenderPatch.w): s_u, s_v raised to what its four boundary lines
+// need, from samples the step already has (lod_step: each line's speed extrapolated to its two ends,
+// the chords of the 5x5 grid's four edges). The direct point renderer steps the outer seventh of
+// the patch at each edge for w_u, w_v (kernels/points/points.cl grid_axis); the LOD decisions and
+// the other renderers do not use them.
+//
+// Edges of the defined part: a line with both bad (NaN/inf) and good samples splits its half of
+// the patch like a line over the threshold, so where a function stops being defined (a pole such
+// as 0.05 / u at u = 0, a sqrt of a negative number) the patches shrink towards that edge step by
+// step (while the line's good part is over a pixel long) and the part left undrawn is at most one
+// last-step patch or about a pixel wide, the same in every variant
+// (before, a patch reaching a pole was measured by its good samples alone: the points variant drew
+// the steep sheet beside the pole as stripes, the tessellated one bridged it with long triangles).
+//
 // Counters: one record of LOD_COUNTERS uints per step (LOD_CHILDREN, LOD_SPLIT, ...); record 0
 // holds the initial patch count and, at LOD_RENDER_TOTAL, the render list's length. These, the
 // patch structs and LOD_LOCAL come from the prelude (paramlod.core.layouts).
@@ -53,6 +70,36 @@ inline void grow_box(float4* box, Sample s) {
     box->z = fmax(box->z, s.s.x); box->w = fmax(box->w, s.s.y);
 }
 
+// How far beyond the measured lines a boundary's need may raise a patch's sample measure (the
+// raise only corrects the extrapolation to the edge; a boundary needing more means the patch
+// should have split, and the cap keeps one bad sample from costing a whole grid).
+#define BOUNDARY_CAP 2.0f
+// A line with bad and good samples splits while its good segments are longer than this (pixels).
+#define MIXED_MIN_PX 1.0f
+// The share of a boundary's need the raise asks for. The point renderer's default density (1.5
+// samples per measured pixel, steps of 0.67 px) leaves a margin below the hole-free step of
+// 1/sqrt(2) px; the boundary, measured at its end rather than estimated from segment averages,
+// is held to that step exactly (sqrt(2) / 1.5), so the common small excess at an edge (a few %,
+// nearly every patch of a sphere) costs no samples and only a real shortfall raises the grid.
+#define BOUNDARY_SHARE 0.9428090f
+
+// A line's speed at its end extrapolated linearly from its two segments nearest the end (a, then
+// b; their midpoints lie half and one and a half segments from the end): exact for a speed that
+// changes linearly, an overestimate at a speed maximum on the edge. Unmeasurable (inf or NaN) values give 0: a patch
+// with an infinite segment already has an infinite measure. Two statements, so the compiler
+// cannot fuse them into an fma the numpy twin would not reproduce.
+inline float edge_extrapolate(float a, float b) {
+    float t = 1.5f * a;
+    float r = t - 0.5f * b;
+    return isfinite(r) ? fmax(r, 0.0f) : 0.0f;
+}
+
+// w = max(s, min(BOUNDARY_CAP * s, BOUNDARY_SHARE * need)), as the twin (paramlod/lod/reference.py).
+inline float raise_measure(float s, float need) {
+    float n = BOUNDARY_SHARE * need;
+    return fmax(s, fmin(BOUNDARY_CAP * s, n));
+}
+
 inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u1, float v0, float v1, uint inst) {
     if (slot < cap) {
         EvalPatch c;
@@ -63,10 +110,11 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
 }
 
 // The decision for one measured patch: cull, render (or force out on the last step), or split
-// into 2, 3 or 4 children by the 7 patterns. eu, ev: the four u- and v-polyline lengths; mu_seg,
-// mv_seg: their longest segments; box: screen bounding box; code: AND of the samples' outcodes.
-inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, float mu_seg, float mv_seg,
-                       float4 box, uint code, __global EvalPatch* out, uint out_cap,
+// into 2, 3 or 4 children by the 7 patterns. eu, ev: the four u- and v-polyline lengths; mixed: the
+// 8 lines (u then v) that have both bad and good samples, split like a long line; mu_seg,
+// mv_seg: their longest segments; w_u, w_v: 7 x those raised to the boundary lines' need; box: screen bounding box; code: AND of the samples' outcodes.
+inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const bool* mixed,
+                       float mu_seg, float mv_seg, float w_u, float w_v, float4 box, uint code, __global EvalPatch* out, uint out_cap,
                        __global RenderPatch* render, uint render_cap,
                        __global uint* counters, __global uint* render_count,
                        float t_u, float t_v, uint step, uint force)
@@ -75,10 +123,10 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, float 
     float u0 = patch.range.x, u1 = patch.range.y, v0 = patch.range.z, v1 = patch.range.w;
     if (code != 0u) { atomic_inc(&counters[LOD_CULLED]); return; }  // every sample outside one clip plane
 
-    bool a = eu[0] > t_u || eu[1] > t_u;   // u-lines in the lower v half
-    bool b = eu[2] > t_u || eu[3] > t_u;   // u-lines in the upper v half
-    bool c = ev[0] > t_v || ev[1] > t_v;   // v-lines in the left u half
-    bool d = ev[2] > t_v || ev[3] > t_v;   // v-lines in the right u half
+    bool a = eu[0] > t_u || eu[1] > t_u || mixed[0] || mixed[1];   // u-lines in the lower v half
+    bool b = eu[2] > t_u || eu[3] > t_u || mixed[2] || mixed[3];   // u-lines in the upper v half
+    bool c = ev[0] > t_v || ev[1] > t_v || mixed[4] || mixed[5];   // v-lines in the left u half
+    bool d = ev[2] > t_v || ev[3] > t_v || mixed[6] || mixed[7];   // v-lines in the right u half
     bool split = a || b || c || d;
 
     if (!split || force) {
@@ -92,7 +140,7 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, float 
                              7.0f * mu_seg, 7.0f * mv_seg);
             r.inst = inst;
             r.flags = step | (split ? FLAG_FORCED : 0u);
-            r.pad0 = r.pad1 = 0u;
+            r.w = (float2)(w_u, w_v);
             render[slot] = r;
         }
         atomic_inc(&counters[LOD_RENDERED]);
@@ -154,6 +202,12 @@ inline float2 lod_uv(uint s, float u0, float v0, float du, float dv) {
     return (float2)(u0 + du * ((float)(e % 5u) * 0.25f), v0 + dv * ((float)(e / 5u) * 0.25f));
 }
 
+inline Sample lod_at(__local const float2* pos, __local const int* state, uint s) {
+    Sample q;
+    q.s = pos[s]; q.state = state[s]; q.code = 0u;
+    return q;
+}
+
 // One LOD step: a work-group of LOD_LOCAL work-items measures one patch at a time, each work-item
 // evaluating some of its 89 samples (a patch's samples are the expensive part, and a step with a
 // few hundred patches would leave most of a GPU idle with one work-item per patch). The number
@@ -174,6 +228,8 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
     __local float4 box_part[LOD_LOCAL];
     __local uint code_part[LOD_LOCAL];
     __local float line[16];   // 0..3 u-line lengths, 4..7 v-line lengths, 8..15 their longest segments
+    __local int mixed_line[8];   // the line has both bad and good samples
+    __local float edge[12];   // 0..7 each line's measure extrapolated to its two ends, 8..11 edge chords
     uint n_in = min(counters[(step - 1) * LOD_COUNTERS + LOD_CHILDREN], cap);
     __global uint* c = counters + step * LOD_COUNTERS;
     __global uint* render_count = counters + LOD_RENDER_TOTAL;
@@ -199,13 +255,34 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
         if (l < 8u) {   // one work-item per polyline, its segments summed in order (as the numpy twin)
             float sum = 0.0f, longest = 0.0f;
             for (uint k = 1; k < 8u; ++k) {
-                Sample sa, sb;
-                sa.s = pos[l * 8u + k - 1u]; sa.state = state[l * 8u + k - 1u];
-                sb.s = pos[l * 8u + k]; sb.state = state[l * 8u + k];
-                float len = seg_len(sa, sb);
+                float len = seg_len(lod_at(pos, state, l * 8u + k - 1u), lod_at(pos, state, l * 8u + k));
                 sum += len; longest = fmax(longest, len);
             }
             line[l] = sum; line[8u + l] = longest;
+            uint n_bad = 0;
+            for (uint k = 0; k < 8u; ++k) n_bad += state[l * 8u + k] == 2 ? 1u : 0u;
+            // ... while its good part is longer than a pixel: past that, the undefined rest of the
+            // line beside it is sub-pixel too (a finite edge, as a dome's rim, stops splitting there)
+            mixed_line[l] = n_bad > 0u && n_bad < 8u && sum > MIXED_MIN_PX;
+            // the line's speed at its two ends (on the patch's edges across it), from its first and
+            // last two segments: 7 segments span the line, so 7 x a segment is a whole-line measure
+            float s0 = seg_len(lod_at(pos, state, l * 8u), lod_at(pos, state, l * 8u + 1u));
+            float s1 = seg_len(lod_at(pos, state, l * 8u + 1u), lod_at(pos, state, l * 8u + 2u));
+            float s5 = seg_len(lod_at(pos, state, l * 8u + 5u), lod_at(pos, state, l * 8u + 6u));
+            float s6 = seg_len(lod_at(pos, state, l * 8u + 6u), lod_at(pos, state, l * 8u + 7u));
+            edge[l] = 7.0f * fmax(edge_extrapolate(s0, s1), edge_extrapolate(s6, s5));
+        } else if (l < 12u) {
+            // the 5x5 grid's four edges (v = v0, v = v1 along u; u = u0, u = u1 along v):
+            // 4 x the longest of each edge's 4 chords, a whole-line measure of the edge itself
+            uint e = l - 8u;
+            uint first = e == 0u ? 0u : e == 1u ? 20u : e == 2u ? 0u : 4u;
+            uint stride = e < 2u ? 1u : 5u;
+            float longest = 0.0f;
+            for (uint k = 0; k < 4u; ++k) {
+                uint at = 64u + first + k * stride;
+                longest = fmax(longest, seg_len(lod_at(pos, state, at), lod_at(pos, state, at + stride)));
+            }
+            edge[l] = 4.0f * longest;
         }
         for (uint h = LOD_LOCAL / 2; h > 0; h >>= 1) {   // box and outcode over the work-group
             if (l < h) {
@@ -220,7 +297,16 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
             float ev[4] = {line[4], line[5], line[6], line[7]};
             float mu_seg = fmax(fmax(line[8], line[9]), fmax(line[10], line[11]));
             float mv_seg = fmax(fmax(line[12], line[13]), fmax(line[14], line[15]));
-            lod_decide(patch, eu, ev, mu_seg, mv_seg, box_part[0], code_part[0], out, cap, render,
+            // what the boundary lines need along u: the u-lines' speeds at u0 and u1 (across those
+            // edges) and the chords of the edges v = v0, v1 (along them); along v the same with the
+            // v-lines and the edges u = u0, u1. (Extrapolating the u-lines' measure to v0 and v1
+            // as well added samples, 1-6 %, and closed no hole the chords left.)
+            float nu_b = fmax(fmax(fmax(edge[0], edge[1]), fmax(edge[2], edge[3])), fmax(edge[8], edge[9]));
+            float nv_b = fmax(fmax(fmax(edge[4], edge[5]), fmax(edge[6], edge[7])), fmax(edge[10], edge[11]));
+            float w_u = raise_measure(7.0f * mu_seg, nu_b), w_v = raise_measure(7.0f * mv_seg, nv_b);
+            bool mixed[8];
+            for (uint k = 0; k < 8u; ++k) mixed[k] = mixed_line[k] != 0;
+            lod_decide(patch, eu, ev, mixed, mu_seg, mv_seg, w_u, w_v, box_part[0], code_part[0], out, cap, render,
                        render_cap, c, render_count, t_u, t_v, step, force);
         }
         barrier(CLK_LOCAL_MEM_FENCE);   // the next patch overwrites the local arrays

@@ -12,28 +12,89 @@ inline uint side_count(float m, float factor, uint max_side) {
     return max((uint)n, 2u);
 }
 
+// What a patch's sample counts are measured from (`measure`, paramlod/renderers/sampling.py
+// MEASURES): 0 s_u, s_v (7 x the longest LOD segment: even the densest part of the patch gets
+// `factor` samples per pixel); 1 e_u, e_v (the thesis's adaptive sampling: about `factor` samples
+// per pixel on average, cheaper, may leave 1-pixel holes); 2 w_u, w_v (s_u, s_v raised to what the
+// patch's four boundary lines need, kernels/lod/lod.cl, used with s_u, s_v by grid_axis: two patches
+// sharing an edge both sample it densely enough, so the direct variant is watertight on patch
+// boundaries).
+inline float2 patch_measure(RenderPatch rp, uint measure) {
+    if (measure == 1u) return rp.ext.xy;
+    if (measure == 2u) return rp.w;
+    return rp.ext.zw;
+}
+
+// One direction of a grid. Uniform (na = 0): n samples, n - 1 equal steps. Boundary strips
+// (measure 2 where the boundary raised the measure, w > s): the outer seventh at each end, where the
+// LOD lines could not see the speed the edge has, is stepped for w (na steps each), the five
+// sevenths between for s (nm steps): n = 2 na + nm + 1. Raising only the strips costs about 2/7 of
+// what raising the whole grid to w would.
+typedef struct {
+    uint n, na, nm;
+} GridAxis;
+
+inline GridAxis grid_axis(float s, float w, uint boundary, float factor, uint max_side) {
+    GridAxis a;
+    a.na = 0u; a.nm = 0u;
+    a.n = side_count(w, factor, max_side);
+    if (!boundary || !(w > s) || a.n >= max_side) return a;
+    float fa = w * factor;
+    fa = fa * (1.0f / 7.0f);
+    float fm = s * factor;
+    fm = fm * (5.0f / 7.0f);
+    float na = fmax(ceil(fa), 1.0f), nm = fmax(ceil(fm), 1.0f);
+    float n = 2.0f * na + nm + 1.0f;
+    if (!(n < (float)max_side) || n >= (float)a.n) return a;   // no cheaper than uniform: uniform
+    a.na = (uint)na; a.nm = (uint)nm; a.n = (uint)n;
+    return a;
+}
+
 // The sampling grid of one patch: nu x nv samples spanning the range widened by `widen` per
 // side (so neighbouring patches overlap and leave no seam), clamped to the function's domain.
-// use_extent = 0 measures with s_u, s_v (7 x the longest LOD segment: even the densest part of
-// the patch gets `factor` samples per pixel); 1 with e_u, e_v (the thesis's adaptive sampling:
-// about `factor` samples per pixel on average, cheaper, may leave 1-pixel holes).
 typedef struct {
-    float u0, v0, su, sv;   // first sample and steps
+    float u0, v0, su, sv;   // first sample and (middle) steps
     uint nu, nv;
+    float u1, v1, au, av;   // last sample, strip steps (boundary strips only)
+    uint nau, nav;          // strip steps per end; 0: uniform
 } PointGrid;
 
-inline PointGrid point_grid(RenderPatch rp, __global const float* I, float factor, uint use_extent,
+inline PointGrid point_grid(RenderPatch rp, __global const float* I, float factor, uint measure,
                             float widen, uint max_side) {
     PointGrid g;
-    g.nu = side_count(use_extent ? rp.ext.x : rp.ext.z, factor, max_side);
-    g.nv = side_count(use_extent ? rp.ext.y : rp.ext.w, factor, max_side);
+    float2 m = patch_measure(rp, measure);
+    GridAxis gu = grid_axis(rp.ext.z, m.x, measure == 2u, factor, max_side);
+    GridAxis gv = grid_axis(rp.ext.w, m.y, measure == 2u, factor, max_side);
+    g.nu = gu.n; g.nv = gv.n; g.nau = gu.na; g.nav = gv.na;
     float wu = (rp.range.y - rp.range.x) * widen, wv = (rp.range.w - rp.range.z) * widen;
     float u0 = fmax(rp.range.x - wu, I[INST_DOMAIN + 0]), u1 = fmin(rp.range.y + wu, I[INST_DOMAIN + 1]);
     float v0 = fmax(rp.range.z - wv, I[INST_DOMAIN + 2]), v1 = fmin(rp.range.w + wv, I[INST_DOMAIN + 3]);
-    g.u0 = u0; g.v0 = v0;
-    g.su = (u1 - u0) / (float)(g.nu - 1);
-    g.sv = (v1 - v0) / (float)(g.nv - 1);
+    g.u0 = u0; g.v0 = v0; g.u1 = u1; g.v1 = v1;
+    if (gu.na) {
+        float l = (u1 - u0) * (1.0f / 7.0f);
+        g.au = l / (float)gu.na;
+        g.su = ((u1 - u0) - 2.0f * l) / (float)gu.nm;
+    } else {
+        g.au = 0.0f;
+        g.su = (u1 - u0) / (float)(g.nu - 1);
+    }
+    if (gv.na) {
+        float l = (v1 - v0) * (1.0f / 7.0f);
+        g.av = l / (float)gv.na;
+        g.sv = ((v1 - v0) - 2.0f * l) / (float)gv.nm;
+    } else {
+        g.av = 0.0f;
+        g.sv = (v1 - v0) / (float)(g.nv - 1);
+    }
     return g;
+}
+
+// Sample i of one grid direction (first x0, last x1, n samples, na strip steps of a, middle steps of m).
+inline float grid_at(float x0, float x1, uint n, uint na, float a, float m, uint i) {
+    if (na == 0u) return x0 + m * (float)i;                        // uniform, as ever
+    if (i <= na) return x0 + a * (float)i;                         // first strip
+    if (i + na >= n - 1u) return x1 - a * (float)(n - 1u - i);     // last strip, from the end
+    return (x0 + a * (float)na) + m * (float)(i - na);             // middle
 }
 
 #define SAMPLE_DRAWN 0
@@ -121,9 +182,10 @@ inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* 
 #define CHUNK_BITS 40
 #define CHUNK_MASK ((1ul << CHUNK_BITS) - 1ul)
 
-inline uint patch_chunks(RenderPatch rp, float factor, uint use_extent, uint max_side) {
-    uint nu = side_count(use_extent ? rp.ext.x : rp.ext.z, factor, max_side);
-    uint nv = side_count(use_extent ? rp.ext.y : rp.ext.w, factor, max_side);
+inline uint patch_chunks(RenderPatch rp, float factor, uint measure, uint max_side) {
+    float2 m = patch_measure(rp, measure);
+    uint nu = grid_axis(rp.ext.z, m.x, measure == 2u, factor, max_side).n;
+    uint nv = grid_axis(rp.ext.w, m.y, measure == 2u, factor, max_side).n;
     return (nu * nv + POINTS_LOCAL - 1u) / POINTS_LOCAL;
 }
 
@@ -131,12 +193,12 @@ inline uint patch_chunks(RenderPatch rp, float factor, uint use_extent, uint max
 // its first chunk, so first chunks increase with the place (points_direct searches them).
 // order[place] = first chunk << 32 | patch index.
 __kernel void points_schedule(__global const RenderPatch* patches, __global const uint* count,
-                              uint count_at, uint capacity, float factor, uint use_extent,
+                              uint count_at, uint capacity, float factor, uint measure,
                               uint max_side, __global ulong* order, __global ulong* counters)
 {
     uint n_patches = min(count[count_at], capacity);
     for (uint pid = get_global_id(0); pid < n_patches; pid += get_global_size(0)) {
-        ulong k = patch_chunks(patches[pid], factor, use_extent, max_side);
+        ulong k = patch_chunks(patches[pid], factor, measure, max_side);
         ulong old = atom_add(&counters[SCHED_AT], (1ul << CHUNK_BITS) | k);
         order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
     }
@@ -150,7 +212,7 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
                    __global const float* inst_f, __global const uint* inst_u,
                    __global const float* params, __global const float4* materials,
                    __global const float* cam, __global const float* light,
-                   float factor, uint use_extent, float widen, uint max_side,
+                   float factor, uint measure, float widen, uint max_side,
                    __global ulong* color_buf, __global ulong* aux_buf,
                    __global ulong* counters   // samples, atomics, NaN samples, capped patches, schedule
 #ifdef PL_RECORD
@@ -184,7 +246,7 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
             __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
             uint object_id = inst_u[inst * INST_U + INST_OBJECT];
             float4 mat = materials[inst];
-            PointGrid g = point_grid(rp, I, factor, use_extent, widen, max_side);
+            PointGrid g = point_grid(rp, I, factor, measure, widen, max_side);
             uint total_here = g.nu * g.nv;
             if (c == first && get_local_id(0) == 0 && (g.nu == max_side || g.nv == max_side)) n_capped++;
             for (; c < min(next, c_end); ++c) {
@@ -194,7 +256,8 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
                 float fx, fy;
                 ulong key, aux;
                 int r = point_sample(func, P, I, cam, mat, light, object_id,
-                                     g.u0 + g.su * (float)iu, g.v0 + g.sv * (float)iv, &fx, &fy, &key, &aux);
+                                     grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu),
+                                     grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv), &fx, &fy, &key, &aux);
                 n_samples++;
 #ifdef PL_RECORD
                 rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;

@@ -10,6 +10,7 @@ import sys
 import tempfile
 import threading
 import time
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -191,6 +192,32 @@ def add_output(parser, required: bool = True, default_help: str = ""):
 def add_stats(parser):
     """``--stats FILE``: the frame statistics as JSON."""
     return parser.add_argument("--stats", metavar="FILE", help="write the frame statistics as JSON to this file")
+
+
+def format_warning(message) -> str:
+    """One line for a warning: ``paramlod: warning: <message>``; the message's own line breaks and
+    runs of spaces become single spaces, and no source path or code line is shown (they name
+    paramlod's files, not the user's input)."""
+    return f"paramlod: warning: {' '.join(str(message).split())}\n"
+
+
+def install_warning_format(stream=None):
+    """Show every Python warning on the command line as ``format_warning``'s one line (on ``stream``,
+    default stderr at the time of the warning), instead of Python's ``path:line: Category: message``
+    and the source line. Which warnings are shown (once per place, by default) stays Python's
+    filters' choice. Returns the previous ``warnings.showwarning``, to put back if needed."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        out = file or stream or sys.stderr
+        try:
+            out.write(format_warning(message))
+            out.flush()
+        except (OSError, ValueError, AttributeError):   # a closed or missing stderr: drop it, as Python does
+            pass
+
+    previous = warnings.showwarning
+    warnings.showwarning = show
+    return previous
 
 
 def run_reporting_errors(call) -> int:

@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 from paramlod.app import dist, gallery, glyphs, mesh_cmd, scenefile, surfels_cmd
-from paramlod.app.args import Parser, add_size, add_stats, check_outputs, positive_int, progress, run_reporting_errors, write_all_or_none
+from paramlod.app.args import (Parser, add_size, add_stats, check_outputs, install_warning_format, positive_int, progress,
+                               run_reporting_errors, write_all_or_none)
 from paramlod.app.bench import run as bench
 from paramlod.device import context as device_context
 from paramlod.core.files import write_atomically
@@ -201,6 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    install_warning_format()   # a warning is one line naming the input, not paramlod's source line
     args = build_parser().parse_args(argv)
 
     def run() -> int:

@@ -212,7 +212,7 @@ RENDER_PATCH = Record(
         Field("ext", FLOAT, 4, "e_u, e_v, s_u, s_v in pixels"),
         Field("inst", UINT),
         Field("flags", UINT, 1, "bits 0-3: LOD step; bit 4: forced at the last step"),
-        Field("pad", UINT, 2),
+        Field("w", FLOAT, 2, "w_u, w_v: s_u, s_v raised to what the patch's four boundary lines need (the direct points renderer)"),
     ], struct="RenderPatch",
     constants=[Constant("FLAG_FORCED", 16, True, "RenderPatch.flags: forced out at the last step")])
 

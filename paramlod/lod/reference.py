@@ -55,6 +55,47 @@ def _seg(s, state):
     return np.where((a == 2) | (b == 2), np.float32(0), d)
 
 
+BOUNDARY_CAP = F(2.0)   # kernels/lod/lod.cl BOUNDARY_CAP
+MIXED_MIN_PX = F(1.0)   # kernels/lod/lod.cl MIXED_MIN_PX
+BOUNDARY_SHARE = F(0.9428090)   # kernels/lod/lod.cl BOUNDARY_SHARE: sqrt(2) / 1.5
+
+
+def edge_extrapolate(a, b):
+    """Twin of edge_extrapolate() in lod.cl: a line's speed at its end from its two segments nearest
+    the end (a, then b); 0 where unmeasurable."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        t = F(1.5) * np.asarray(a, np.float32)
+        r = (t - F(0.5) * np.asarray(b, np.float32)).astype(np.float32)
+    return np.where(np.isfinite(r), np.fmax(r, F(0)), F(0)).astype(np.float32)
+
+
+def raise_measure(s, need):
+    """Twin of raise_measure() in lod.cl: s raised to BOUNDARY_SHARE x a boundary's need, at most
+    to BOUNDARY_CAP x s."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        n = (BOUNDARY_SHARE * np.asarray(need, np.float32)).astype(np.float32)
+        return np.fmax(s, np.fmin(BOUNDARY_CAP * s, n)).astype(np.float32)
+
+
+def boundary_measures(seg_u, seg_v, s_g, st_g, msu_line, msv_line):
+    """w_u, w_v (n,) of lod.cl: 7 x the longest segment raised to what the patch's four boundary
+    lines need. seg_u, seg_v: (n, 4, 7) segments of the u- and v-lines; s_g, st_g: the 5x5 grid
+    (n, j over v, i over u); msu_line, msv_line: (n, 4) each line's longest segment."""
+    F7 = F(7)
+    ends_u = F7 * np.fmax(edge_extrapolate(seg_u[:, :, 0], seg_u[:, :, 1]),
+                          edge_extrapolate(seg_u[:, :, 6], seg_u[:, :, 5]))   # (n, 4)
+    ends_v = F7 * np.fmax(edge_extrapolate(seg_v[:, :, 0], seg_v[:, :, 1]),
+                          edge_extrapolate(seg_v[:, :, 6], seg_v[:, :, 5]))
+    chord = lambda s, st: F(4) * _seg(s, st).max(axis=-1)   # noqa: E731  (an edge's 4 chords)
+    e8, e9 = chord(s_g[:, 0], st_g[:, 0]), chord(s_g[:, 4], st_g[:, 4])                 # v = v0, v1
+    e10, e11 = chord(s_g[:, :, 0], st_g[:, :, 0]), chord(s_g[:, :, 4], st_g[:, :, 4])   # u = u0, u1
+    nu_b = np.fmax(np.fmax(np.fmax(ends_u[:, 0], ends_u[:, 1]), np.fmax(ends_u[:, 2], ends_u[:, 3])), np.fmax(e8, e9))
+    nv_b = np.fmax(np.fmax(np.fmax(ends_v[:, 0], ends_v[:, 1]), np.fmax(ends_v[:, 2], ends_v[:, 3])), np.fmax(e10, e11))
+    with np.errstate(over="ignore"):
+        su, sv = F7 * msu_line.max(axis=1), F7 * msv_line.max(axis=1)
+    return raise_measure(su, nu_b), raise_measure(sv, nv_b)
+
+
 def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
     """One PATCH SUBDIVISION step. Returns (children, render patches, stats)."""
     n = len(patches)
@@ -87,6 +128,7 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
         eu += seg_u[:, :, k]
         ev += seg_v[:, :, k]
     msu, msv = seg_u.max(axis=(1, 2)), seg_v.max(axis=(1, 2))
+    w_u, w_v = boundary_measures(seg_u, seg_v, s_g, st_g, seg_u.max(axis=2), seg_v.max(axis=2))
     allpts = np.concatenate([s_r.reshape(n, -1, 2), s_c.reshape(n, -1, 2), s_g.reshape(n, -1, 2)], axis=1)
     front = np.concatenate([st_r.reshape(n, -1), st_c.reshape(n, -1), st_g.reshape(n, -1)], axis=1) == 0
     big = np.float32(np.inf)
@@ -97,10 +139,14 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
 
     culled = code != 0
     tu, tv = F(t_u), F(t_v)
-    a = (eu[:, 0] > tu) | (eu[:, 1] > tu)
-    b = (eu[:, 2] > tu) | (eu[:, 3] > tu)
-    c = (ev[:, 0] > tv) | (ev[:, 1] > tv)
-    d = (ev[:, 2] > tv) | (ev[:, 3] > tv)
+    # lines with both bad and good samples split like long ones (lod.cl: edges of the defined part)
+    bad_r, bad_c = (st_r == 2).sum(axis=2), (st_c == 2).sum(axis=2)    # (n, 4) per line
+    mu_ = (bad_r > 0) & (bad_r < 8) & (eu > MIXED_MIN_PX)   # ... while the good part is over a pixel
+    mv_ = (bad_c > 0) & (bad_c < 8) & (ev > MIXED_MIN_PX)
+    a = (eu[:, 0] > tu) | (eu[:, 1] > tu) | mu_[:, 0] | mu_[:, 1]
+    b = (eu[:, 2] > tu) | (eu[:, 3] > tu) | mu_[:, 2] | mu_[:, 3]
+    c = (ev[:, 0] > tv) | (ev[:, 1] > tv) | mv_[:, 0] | mv_[:, 1]
+    d = (ev[:, 2] > tv) | (ev[:, 3] > tv) | mv_[:, 2] | mv_[:, 3]
     split = a | b | c | d
     to_render = ~culled & (~split | bool(force))
     rp = np.zeros(int(to_render.sum()), RENDER_DTYPE)
@@ -108,6 +154,7 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
     rp["bbox"] = np.stack([bx0, by0, bx1, by1], axis=1)[to_render]
     rp["ext"] = np.stack([eu.max(axis=1), ev.max(axis=1), F(7) * msu, F(7) * msv], axis=1)[to_render]
     rp["inst"] = inst[to_render]
+    rp["w"] = np.stack([w_u, w_v], axis=1)[to_render]
     rp["flags"] = step | np.where(split[to_render], FLAG_FORCED, 0)
 
     children = []

@@ -53,7 +53,7 @@ class DirectPointRenderer:
             self._order = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8 * capacity)
             self.order_capacity = capacity
         cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
-        sampling = (settings.factor(), np.uint32(settings.use_extent))
+        sampling = (settings.factor(), settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), self._order,
                 *inst, materials_buf, cam_buf, light_buf, *sampling, np.float32(settings.widen),
                 np.uint32(settings.max_side), keys.color, keys.aux, self.counters, *record_args)

@@ -4,6 +4,11 @@ local-framebuffer variants; kernels/points/points.cl side_count()).
 Per patch side, ``ceil(m * factor) + 1`` samples, where ``m`` is the measure chosen by
 ``sampling`` ("segment": s_u, s_v = 7 x the longest LOD segment; "extent": the thesis's measured
 polyline extents e_u, e_v) and ``factor = density * oversample / (1 - epsilon)`` (docs/points.md).
+The direct variant sizes "segment" patches from w_u, w_v as well: s_u, s_v raised to what the
+patch's four boundary lines need (the LOD stage measures them, kernels/lod/lod.cl). Where w > s,
+the outer seventh of the patch at each end is stepped for w and the rest for s (boundary strips,
+``grid_axes``), so that two patches sharing an edge both cover it at about 2/7 of the cost of a
+whole grid for w; the supersampled local-framebuffer variant has no holes to close and keeps s_u, s_v.
 """
 from __future__ import annotations
 
@@ -14,6 +19,9 @@ import numpy as np
 from paramlod.errors import SceneError
 
 SAMPLING = ("segment", "extent")
+# the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
+# columns a grid is sized from
+MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
 
 
 @dataclass
@@ -55,6 +63,13 @@ class PointSettings:
     def use_extent(self) -> bool:
         return self.sampling == "extent"
 
+    def measure(self, boundary: bool) -> np.uint32:
+        """The kernels' ``measure``: extents, or segments (raised to the boundary lines' need
+        where ``boundary``, the direct variant)."""
+        if self.use_extent:
+            return np.uint32(MEASURE_EXTENT)
+        return np.uint32(MEASURE_BOUNDARY if boundary else MEASURE_SEGMENT)
+
 
 def side_counts(ext: np.ndarray, settings: PointSettings) -> np.ndarray:
     """numpy twin of side_count() in points.cl: samples per side for each measure in ``ext``."""
@@ -64,8 +79,49 @@ def side_counts(ext: np.ndarray, settings: PointSettings) -> np.ndarray:
     return np.where(capped, settings.max_side, np.maximum(np.nan_to_num(n), 2)).astype(np.int64)
 
 
-def grid_counts(render_list: np.ndarray, settings: PointSettings) -> tuple[np.ndarray, np.ndarray]:
-    """(nu, nv) per render patch, picking the measure columns ``settings.sampling`` selects."""
+def patch_measures(render_list: np.ndarray, measure) -> np.ndarray:
+    """Twin of patch_measure() in points.cl: float32 (n, 2) measures of each render patch."""
+    if int(measure) == MEASURE_BOUNDARY:
+        return np.ascontiguousarray(render_list["w"])   # w_u, w_v
     ext = render_list["ext"]
-    cu, cv = (0, 1) if settings.use_extent else (2, 3)
-    return side_counts(ext[:, cu], settings), side_counts(ext[:, cv], settings)
+    return ext[:, 0:2] if int(measure) == MEASURE_EXTENT else ext[:, 2:4]
+
+
+def grid_axes(s: np.ndarray, w: np.ndarray, boundary: bool, settings: PointSettings):
+    """Twin of grid_axis() in points.cl: (n, na, nm) int64 arrays for one grid direction, from the
+    interior measure ``s`` and the sizing measure ``w``. na = 0: uniform, n samples; else boundary
+    strips of na steps at each end (the outer sevenths, stepped for w) and nm middle steps (for s)."""
+    f32 = np.float32
+    s, w = np.asarray(s, f32), np.asarray(w, f32)
+    n = side_counts(w, settings)
+    na = np.zeros(n.shape, np.int64)
+    nm = np.zeros(n.shape, np.int64)
+    if not boundary:
+        return n, na, nm
+    factor = settings.factor()
+    with np.errstate(invalid="ignore", over="ignore"):
+        fa = (w * factor).astype(f32)
+        fa = (fa * f32(1.0 / 7.0)).astype(f32)
+        fm = (s * factor).astype(f32)
+        fm = (fm * f32(5.0 / 7.0)).astype(f32)
+        ca = np.fmax(np.ceil(fa), f32(1))
+        cm = np.fmax(np.ceil(fm), f32(1))
+        total = (f32(2) * ca + cm + f32(1)).astype(f32)
+        strips = (w > s) & (n < settings.max_side) & (total < f32(settings.max_side)) & ~(total >= n.astype(f32))
+    na[strips] = ca[strips].astype(np.int64)
+    nm[strips] = cm[strips].astype(np.int64)
+    n = n.copy()
+    n[strips] = total[strips].astype(np.int64)   # only finite counts are cast
+    return n, na, nm
+
+
+def grid_counts(render_list: np.ndarray, settings: PointSettings,
+                boundary: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(nu, nv) per render patch, from the measure ``settings.sampling`` selects: as the direct
+    variant samples (``boundary``: segment patches with boundary strips, grid_axes) or as the
+    local-framebuffer variant (``boundary=False``)."""
+    code = settings.measure(boundary)
+    m = patch_measures(render_list, code)
+    strips = int(code) == MEASURE_BOUNDARY
+    ext = render_list["ext"]
+    return (grid_axes(ext[:, 2], m[:, 0], strips, settings)[0], grid_axes(ext[:, 3], m[:, 1], strips, settings)[0])

@@ -3,6 +3,7 @@
 `surfels sample` refuses an output that is not a .surfels file before sampling."""
 import argparse
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -185,3 +186,42 @@ def test_surfels_sample_accepts_a_surfels_output(tmp_path, capsys):
     assert main(["surfels", "sample", str(GALLERY / "data" / "bunny.ply"), "-n", "50", "--views", "2",
                  "--resolution", "32", "-q", "-o", str(out)]) == 0
     assert len(SurfelSet.load(out)) > 0
+
+
+# -- warnings: one line each, no source path --------------------------------------------------------
+DEGENERATE_OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\nf 1 1 2\n"   # face 3 repeats a vertex
+
+
+def _check_one_line_warning(stderr: str, mesh: Path):
+    lines = stderr.splitlines()
+    assert lines == [f"paramlod: warning: mesh file {mesh}: dropped 1 of 3 faces that are degenerate "
+                     "(a repeated vertex or zero area)"], stderr
+    assert ".py" not in stderr and "Warning:" not in stderr
+
+
+def test_install_warning_format_makes_each_warning_one_line(tmp_path):
+    """In a fresh interpreter, as a user runs the command: the formatter installed, then the CLI."""
+    mesh = tmp_path / "degen.obj"
+    mesh.write_text(DEGENERATE_OBJ)
+    code = ("import sys; from paramlod.app.args import install_warning_format; install_warning_format(); "
+            "from paramlod.app.cli import main; sys.exit(main(sys.argv[1:]))")
+    r = subprocess.run([sys.executable, "-c", code, "mesh", "info", str(mesh)], capture_output=True, text=True,
+                       cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr
+    _check_one_line_warning(r.stderr, mesh)
+
+
+def test_the_paramlod_command_shows_warnings_as_one_line(tmp_path):
+    """The entry point itself (paramlod.app.cli:main installs the formatter)."""
+    mesh = tmp_path / "degen.obj"
+    mesh.write_text(DEGENERATE_OBJ)
+    r = subprocess.run([sys.executable, "-m", "paramlod.app.cli", "mesh", "info", str(mesh)],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr
+    _check_one_line_warning(r.stderr, mesh)
+
+
+def test_format_warning_collapses_lines():
+    from paramlod.app.args import format_warning
+
+    assert format_warning("a\n  b\tc ") == "paramlod: warning: a b c\n"

@@ -83,12 +83,22 @@ def test_factor_and_side_counts_twin():
     s = PointSettings(sampling="extent", oversample=2.0, epsilon=0.2)
     assert s.factor() == np.float32(1.5 * 2.0 / 0.8)
     assert side_counts(np.float32([10]), s).tolist() == [int(np.ceil(np.float32(10) * s.factor())) + 1]
-    # grid_counts picks e (extent) or s (segment) columns
-    rl = np.zeros(1, [("ext", "<f4", 4)])
+    # grid_counts picks e (extent), s (segment) or, for the direct variant's segment sampling,
+    # w (s raised to the boundary lines, RenderPatch.w) columns
+    from paramlod.lod.patches import RENDER_DTYPE
+    rl = np.zeros(1, RENDER_DTYPE)
     rl["ext"] = [[10, 20, 30, 40]]
+    rl["w"] = np.float32([[35, 41]])
     assert [a.tolist() for a in grid_counts(rl, s)] == [side_counts(np.float32([10]), s).tolist(),
                                                          side_counts(np.float32([20]), s).tolist()]
+    assert [a.tolist() for a in grid_counts(rl, d, boundary=False)] == [[46], [61]]
+    # the direct variant: uniform for w would be 54 x 63; boundary strips (the outer sevenths stepped
+    # for w, the middle for s) give 2 x ceil(35 * 1.5 / 7) + ceil(30 * 1.5 * 5 / 7) + 1 = 50 and
+    # 2 x 9 + 43 + 1 = 62
+    assert [a.tolist() for a in grid_counts(rl, d)] == [[50], [62]]
+    rl["w"] = np.float32([[30, 40]])   # w = s: not raised, uniform as before
     assert [a.tolist() for a in grid_counts(rl, d)] == [[46], [61]]
+    assert grid_counts(rl, s, boundary=False)[0].tolist() == grid_counts(rl, s)[0].tolist()  # extent: no w
 
 
 @pytest.mark.parametrize("settings", [

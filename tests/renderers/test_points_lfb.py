@@ -61,7 +61,7 @@ class Setup:
         import pyopencl.array as cla
 
         q = cl_device().queue
-        nu, nv = grid_counts(self.render_list, self.settings)
+        nu, nv = grid_counts(self.render_list, self.settings, boundary=False)   # as points_lfb samples
         counts = nu * nv
         total = int(counts.sum())
         off = cla.to_device(q, np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32))
