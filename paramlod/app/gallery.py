@@ -3,6 +3,7 @@ scenes with an [animation] table), with captions that state what was measured.""
 from __future__ import annotations
 
 import json
+import tomllib
 import time
 from pathlib import Path
 
@@ -93,6 +94,22 @@ def markdown(captions: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def check_prepared(files) -> None:
+    """Before any rendering: every file a scene's ``[meta] needs`` (paths beside the scene file) is
+    there, else one message naming the ``[meta] prepare`` command that makes it (data too large to
+    commit, such as the rigged worm)."""
+    for f in files:
+        try:
+            meta = tomllib.loads(Path(f).read_text()).get("meta", {})
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            continue   # render_scene_file reports it with the file's line
+        missing = [n for n in meta.get("needs", []) if not (Path(f).parent / n).exists()]
+        if missing:
+            raise ParamlodError(f"gallery scene {Path(f).stem} needs {', '.join(missing)} (in {Path(f).parent}), "
+                                f"made by `{meta.get('prepare', '?')}`; run that first, or leave the scene out "
+                                f"with --only")
+
+
 def run_gallery(args) -> int:
     from tqdm import tqdm
 
@@ -107,6 +124,7 @@ def run_gallery(args) -> int:
         files = [f for f in files if f.stem in wanted]
     if not files:
         raise ParamlodError(f"no .toml scenes in {folder}")
+    check_prepared(files)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     size = args.size

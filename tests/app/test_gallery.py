@@ -7,6 +7,7 @@ import pytest
 
 from paramlod.app.cli import main
 from paramlod.app.gallery import render_scene_file
+from paramlod.meshlod.build.worm_rig import write_worm
 
 GALLERY = Path(__file__).resolve().parents[2] / "gallery"
 SCENES = sorted(GALLERY.glob("*.toml"))
@@ -18,9 +19,21 @@ def test_the_gallery_has_the_scenes_the_issue_names():
             "giant_worm", "hearts", "palm_trunk", "bunny_surfels"} <= names
 
 
+def _prepared(path, tmp_path):
+    """The scene file, or for the skinned worm (its data is generated, not committed) a copy beside
+    a small worm made by the same generator."""
+    if path.stem != "skinned_worm":
+        return path
+    (tmp_path / "data").mkdir()
+    write_worm(tmp_path / "data" / "skinned_worm.glb", "small")
+    copy = tmp_path / path.name
+    copy.write_text(path.read_text())
+    return copy
+
+
 @pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
-def test_scene_renders_non_empty_and_framed(path):
-    sf, frames, _ = render_scene_file(path, size=(96, 96))
+def test_scene_renders_non_empty_and_framed(path, tmp_path):
+    sf, frames, _ = render_scene_file(_prepared(path, tmp_path), size=(96, 96))
     for f in frames:
         cov = f.coverage
         share = cov.mean()
@@ -44,3 +57,14 @@ def test_gallery_command_writes_images_captions_and_markdown(tmp_path):
     assert cap["variant"].startswith("mixed") and cap["size"] == [64, 48] and cap["device"]
     assert "hearts.png" in (tmp_path / "README.md").read_text()
     assert main(["gallery", "--scenes", str(GALLERY), "--out", str(tmp_path), "--only", "nope"]) == 2
+
+
+def test_a_scene_whose_data_is_not_prepared_names_the_command(tmp_path, capsys):
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    (scenes / "skinned_worm.toml").write_text((GALLERY / "skinned_worm.toml").read_text())
+    out = tmp_path / "out"
+    assert main(["gallery", "--scenes", str(scenes), "--out", str(out), "--size", "64x48"]) == 2
+    err = capsys.readouterr().err
+    assert "data/skinned_worm.glb" in err and "python gallery/prepare_skinned_worm.py" in err
+    assert not out.exists() or not any(out.iterdir())
