@@ -1,5 +1,5 @@
 // One integer hash for every kernel and shader that needs noise: the debug colour per cluster
-// (meshlod/debug_color.cl) and the screen-door dither of the surfel -> mesh hand-off (pl_dither:
+// (common/debug_color.cl) and the screen-door dither of the surfel -> mesh hand-off (pl_dither:
 // the surfel splat skips pixels whose dither is below the object's mesh weight, the mesh raster and
 // the GL draw those at or above it, so at any weight each pixel comes from exactly one of them;
 // docs/surfels.md). Written in the snippet dialect (the includer includes common/dialect.cl or

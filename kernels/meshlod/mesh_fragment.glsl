@@ -4,7 +4,7 @@
 //   0 colour RGBA16F (linear RGB, alpha 1), 1 linear view depth R32F,
 //   2 world-space normal facing the viewer RGBA16F, 3 object id R32UI.
 // PL_COLOR_BY (MeshDraw.draw's color_by): 0 the material's colour; 1 a colour per cluster, 2 a
-// colour per LOD level (meshlod/debug_color.cl, which the host puts before this file for 1 and 2),
+// colour per LOD level (common/debug_color.cl, which the host puts before this file for 1 and 2),
 // shaded like a material of that colour.
 // Hand-off (paramlod/scene/handoff.py): an object of weight w < 1 (pl_object_weight, indexed by
 // object id: a hand-off mesh is one instance of its own object) keeps only the fragments whose

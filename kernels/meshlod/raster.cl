@@ -23,7 +23,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 #include "common/rows.cl"
 #include "common/keys.cl"
-#include "meshlod/debug_color.cl"
+#include "common/debug_color.cl"
 
 // the host builds with the twin's constants (paramlod/meshlod/raster_reference.py)
 #if !defined(RS_SUBPIXEL_BITS) || !defined(RS_GUARD_PIXELS) || !defined(RS_LARGE_LOCAL)

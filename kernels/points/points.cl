@@ -3,6 +3,21 @@
 // analytic normal and written as a 64-bit key (keys.cl). This file holds the helpers both point
 // variants share and the direct variant; points_lfb.cl (local framebuffers) builds on it.
 
+#include "common/debug_color.cl"
+
+// The debug colouring of the direct variant (PointSettings.color_by): 1 a colour per render patch,
+// keyed by its parameter range and instance (the render list's order varies between devices and
+// frames, its patches do not), 2 a colour per LOD step the patch was made in. Twin:
+// paramlod.renderers.sampling.patch_debug_colors.
+inline float4 debug_material(float4 mat, RenderPatch rp, uint color_by) {
+    if (color_by == 1u) {
+        uint k = pl_hash32(as_uint(rp.range.x) ^ pl_hash32(as_uint(rp.range.z) ^ pl_hash32(rp.inst)));
+        return (float4)(pl_cluster_color(k), mat.w);
+    }
+    if (color_by == 2u) return (float4)(pl_level_color(rp.flags & 15u), mat.w);
+    return mat;
+}
+
 // Sample counts: factor = density * oversample / (1 - epsilon) samples per measured pixel
 // (paramlod/renderers/sampling.py, PointSettings.factor; the numpy twin is paramlod.renderers.sampling.side_counts).
 // Rounding up and adding one gives at least `factor` steps per pixel; never fewer than 2.
@@ -212,7 +227,7 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
                    __global const float* inst_f, __global const uint* inst_u,
                    __global const float* params, __global const float4* materials,
                    __global const float* cam, __global const float* light,
-                   float factor, uint measure, float widen, uint max_side,
+                   float factor, uint measure, float widen, uint max_side, uint color_by,
                    __global ulong* color_buf, __global ulong* aux_buf,
                    __global ulong* counters   // samples, atomics, NaN samples, capped patches, schedule
 #ifdef PL_RECORD
@@ -245,7 +260,7 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
             uint func = inst_u[inst * INST_U + INST_FUNC];
             __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
             uint object_id = inst_u[inst * INST_U + INST_OBJECT];
-            float4 mat = materials[inst];
+            float4 mat = debug_material(materials[inst], rp, color_by);
             PointGrid g = point_grid(rp, I, factor, measure, widen, max_side);
             uint total_here = g.nu * g.nv;
             if (c == first && get_local_id(0) == 0 && (g.nu == max_side || g.nv == max_side)) n_capped++;

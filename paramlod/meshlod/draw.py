@@ -6,7 +6,7 @@ Driven per scene state: ``MeshDraw.upload(arrays, instances)`` when the scene's 
 change, then ``MeshDraw.draw(selection, camera, ...)`` every frame with the cut's (instance,
 cluster) pairs read back from the device. Its OpenCL counterpart is the meshlets rasterizer; both
 draw the same selection with the same shading body (kernels/common/shading.cl) and debug colours
-(kernels/meshlod/debug_color.cl).
+(kernels/common/debug_color.cl).
 
 One draw command per selected pair k: (count = 3 * the cluster's triangles, instanceCount = 1,
 firstIndex = 3 * its first triangle, baseVertex = 0, baseInstance = k), all issued by one
@@ -57,7 +57,7 @@ def _program(ctx, color_by: int):
         head = f"#version 450 core\n#define PL_COLOR_BY {color_by}\n"
         common = [glsl_prelude(), kernels.source("meshlod/mesh_common.glsl")]
         # the debug colours are snippet dialect: the dialect first, then them, then the stage
-        debug = [kernels.source("common/dialect.glsl"), kernels.source("meshlod/debug_color.cl")] if color_by else []
+        debug = [kernels.source("common/dialect.glsl"), kernels.source("common/debug_color.cl")] if color_by else []
         stages = {"vertex_shader": head + "\n".join([*common, kernels.source("meshlod/mesh_vertex.glsl")]),
                   "fragment_shader": head + "\n".join([*common, *debug, kernels.source("meshlod/mesh_fragment.glsl")])}
         try:

@@ -8,7 +8,7 @@ the device, the twin uses what PoCL computes, measured on 2^20 random inputs eac
 ``(x0 y0 + x1 y1) + x2 y2``, ``length`` is ``sqrt(dot(x, x))`` and ``normalize(x)`` is
 ``x * (1 / sqrt(dot(x, x)))`` (NVIDIA's OpenCL on an H200 gave the same keys in
 tests/meshlod/test_raster.py). The shading is keys.cl ``shade()`` (common/shading.cl), the debug
-colours kernels/meshlod/debug_color.cl.
+colours kernels/common/debug_color.cl.
 
 The constants the kernel is built with live here (``SUBPIXEL_BITS``, ``GUARD_PIXELS``): the host
 passes them to the compiler. Used by tests/meshlod/test_raster.py; small frames only (one Python
@@ -21,6 +21,7 @@ import numpy as np
 from paramlod.core.color import srgb8_thresholds
 from paramlod.core.layouts import CAMERA, INSTANCE_F, INSTANCE_U, camera_record
 from paramlod.renderers.shading import LIGHT
+from paramlod.core.debug_colors import cluster_color, level_color
 from paramlod.core.hashing import dither, hash32
 
 SUBPIXEL_BITS = 8            # snapping grid: 1/256 pixel
@@ -136,28 +137,6 @@ def shade(n_view, ev, mat, light):
     code = _srgb8(rgb)
     word = (code[..., 0] << np.uint64(24)) | (code[..., 1] << np.uint64(16)) | (code[..., 2] << np.uint64(8))
     return word | np.uint64(255), n
-
-
-# --- debug colours (kernels/meshlod/debug_color.cl) ------------------------------------------------
-def cluster_color(cluster) -> np.ndarray:
-    """pl_cluster_color: float32 [..., 3] linear RGB of global cluster indices."""
-    h = hash32(cluster)
-    hue = (h & np.uint32(255)).astype(np.float32) / _f(256)
-    sat = _f(0.55) + _f(0.45) * (((h >> np.uint32(8)) & np.uint32(255)).astype(np.float32) / _f(255))
-    val = _f(0.55) + _f(0.45) * (((h >> np.uint32(16)) & np.uint32(255)).astype(np.float32) / _f(255))
-    k = np.stack([hue, hue + _f(0.6666667), hue + _f(0.33333334)], axis=-1)
-    rgb = np.clip(np.abs((k - np.floor(k)) * _f(6) - _f(3)) - _f(1), _f(0), _f(1))
-    return (_f(1) + (rgb - _f(1)) * sat[..., None]) * val[..., None]
-
-
-LEVEL_COLORS = np.array([[0.85, 0.85, 0.85], [0.90, 0.12, 0.10], [0.10, 0.70, 0.15], [0.12, 0.30, 0.95],
-                         [0.95, 0.80, 0.05], [0.80, 0.15, 0.85], [0.05, 0.80, 0.85], [0.95, 0.45, 0.05]],
-                        np.float32)
-
-
-def level_color(level) -> np.ndarray:
-    """pl_level_color: float32 [..., 3] of LOD levels (eight colours, repeating)."""
-    return LEVEL_COLORS[np.asarray(level, np.int64) % 8]
 
 
 def materials(instances, clusters, inst, cluster, color_by: int) -> np.ndarray:

@@ -12,7 +12,7 @@ from paramlod.device.context import cl_device
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.registry import RendererSpec, register_renderer
-from paramlod.renderers.sampling import PointSettings, grid_counts, side_counts  # noqa: F401  (re-exported)
+from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
 from paramlod.function.programs import build
@@ -56,7 +56,8 @@ class DirectPointRenderer:
         sampling = (settings.factor(), settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), self._order,
                 *inst, materials_buf, cam_buf, light_buf, *sampling, np.float32(settings.widen),
-                np.uint32(settings.max_side), keys.color, keys.aux, self.counters, *record_args)
+                np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)), keys.color, keys.aux,
+                self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time
         if args != self._bound:

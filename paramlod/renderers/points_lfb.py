@@ -205,6 +205,9 @@ class LocalFramebufferPoints:
 
     def prepare(self, scene, camera, settings):
         settings.ssaa.validate()
+        if settings.points.color_by != "material":   # refused, not silently drawn in materials
+            raise SceneError(f"points color_by {settings.points.color_by!r} is drawn by the direct variant "
+                             f"\"points\" (and the mesh renderers), not by points-ssaa")
         aa = getattr(settings, "aa", None)   # the frame's mode (RenderSettings.apply_aa)
         if aa is not None:
             # a mode it cannot draw is refused, never drawn as 4xSS; in a frame mixed with tess, a

@@ -16,9 +16,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from paramlod.core.debug_colors import cluster_color, level_color
+from paramlod.core.hashing import hash32
 from paramlod.errors import SceneError
 
 SAMPLING = ("segment", "extent")
+# the direct variant's colouring (kernels/points/points.cl debug_material): the material, a colour
+# per render patch, a colour per LOD step
+COLOR_BY = ("material", "patch", "level")
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
@@ -37,6 +42,7 @@ class PointSettings:
     # anti-aliasing of the direct variant: render into keys supersample x the frame's size, then
     # resolve each block (colour averaged over covered subsamples, alpha = coverage); 1 = off
     supersample: int = 1
+    color_by: str = "material"   # the direct variant's debug colouring: "patch" or "level" (LOD step)
 
     def validate(self):
         if not 0.1 <= self.density <= 16:
@@ -54,6 +60,8 @@ class PointSettings:
         if self.supersample not in (1, 2, 3, 4) or isinstance(self.supersample, bool):
             raise SceneError(f"points supersample must be 1 (off), 2, 3 or 4 subsamples per pixel side, "
                              f"got {self.supersample!r}")
+        if self.color_by not in COLOR_BY:
+            raise SceneError(f"points color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
 
     def factor(self) -> np.float32:
         """Samples per measured pixel along each side, as the kernel receives it (float32)."""
@@ -125,3 +133,16 @@ def grid_counts(render_list: np.ndarray, settings: PointSettings,
     strips = int(code) == MEASURE_BOUNDARY
     ext = render_list["ext"]
     return (grid_axes(ext[:, 2], m[:, 0], strips, settings)[0], grid_axes(ext[:, 3], m[:, 1], strips, settings)[0])
+
+
+def patch_debug_materials(render_list: np.ndarray, materials: np.ndarray, color_by: str) -> np.ndarray:
+    """numpy twin of debug_material() in points.cl: float32 [n, 4] material of each render patch
+    (RGB replaced by the patch's or its LOD step's debug colour; ``materials`` per instance)."""
+    m = np.asarray(materials, np.float32)[render_list["inst"]].copy()
+    if color_by == "patch":
+        r = np.ascontiguousarray(render_list["range"], np.float32).view(np.uint32)
+        key = hash32(r[:, 0] ^ hash32(r[:, 2] ^ hash32(render_list["inst"].astype(np.uint32))))
+        m[:, :3] = cluster_color(key)
+    elif color_by == "level":
+        m[:, :3] = level_color(render_list["flags"] & np.uint32(15))
+    return m

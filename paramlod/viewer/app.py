@@ -174,6 +174,8 @@ class Viewer:
         st.lod.threshold = tuple(t * self.threshold_scale for t in st.lod.threshold)
         st.mesh.threshold_px = st.mesh.threshold_px * self.threshold_scale
         st.mesh.color_by = self.debug if self.debug in ("cluster", "level") else st.mesh.color_by
+        if self.variant == "points" and self.debug in ("patch", "level"):   # the direct points draw these
+            st.points.color_by = self.debug
         self.settings = st
 
     def reload(self, changed=()) -> bool:
@@ -292,7 +294,9 @@ class Viewer:
 
     def _next_debug(self) -> None:
         parametric, meshes = self._kinds()
-        modes = ["material", "object"] + (["cluster", "level"] if meshes else [])
+        direct = parametric and self.variant == "points"   # per patch and per LOD step: the direct points
+        modes = (["material", "object"] + (["patch"] if direct else []) + (["cluster"] if meshes else [])
+                 + (["level"] if meshes or direct else []))
         self.debug = modes[(modes.index(self.debug) + 1) % len(modes)] if self.debug in modes else "material"
         self._settings()
 

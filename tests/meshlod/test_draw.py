@@ -189,7 +189,7 @@ def test_a_subset_draws_exactly_those_clusters(mesh, one):
         assert len(rgb) == 1
         colours.append(tuple(rgb[0]))
     assert len(set(colours)) == len(chosen)
-    # kernels/meshlod/debug_color.cl's colour of the global cluster index (its numpy twin), in the
+    # kernels/common/debug_color.cl's colour of the global cluster index (its numpy twin), in the
     # RGBA16F target's precision
     np.testing.assert_allclose(colours, cluster_color(np.array(chosen, np.uint32)), atol=1e-3)
     # the subset covers the union of its clusters, each pixel shows the nearest of them

@@ -1,7 +1,7 @@
 """The OpenCL mesh rasterizer (paramlod.meshlod.raster, kernels/meshlod/raster.cl) against its numpy
 twin (paramlod.meshlod.raster_reference: the same colour and aux keys, bit for bit), its fill
 rule and watertightness, OpenGL's coverage of the same triangles, the large-triangle list's growth,
-and the debug colours (kernels/meshlod/debug_color.cl) compiled as GLSL.
+and the debug colours (kernels/common/debug_color.cl) compiled as GLSL.
 
 Test meshes carry no DAG: ``flat_lod`` makes clusters of consecutive runs of at most 128
 triangles, all roots, and every test draws every (instance, cluster) pair, as a selection buffer
@@ -444,7 +444,7 @@ def test_only_nearer_keys_replace_what_is_there(scene):
 
 def test_debug_colours_compile_as_glsl_and_match_the_twin():
     ctx = gl_context()
-    src = "#version 450\n" + kernels.source("common/dialect.glsl") + kernels.source("meshlod/debug_color.cl")
+    src = "#version 450\n" + kernels.source("common/dialect.glsl") + kernels.source("common/debug_color.cl")
     prog = ctx.program(
         vertex_shader="#version 450\nvoid main() { vec2 p = vec2(gl_VertexID & 1, gl_VertexID >> 1);"
                       " gl_Position = vec4(p * 4.0 - 1.0, 0.0, 1.0); }",

@@ -99,6 +99,13 @@ def test_variant_aa_debug_pause_and_hud_keys(window, tmp_path):
     assert v.debug == "object"
     ids = v.frame.object_id
     assert not np.array_equal(v.image[ids > 0], plain[ids > 0]) and np.array_equal(v.image[ids == 0], plain[ids == 0])
+    for mode in ("patch", "level"):   # the direct points colour each render patch, then each LOD step
+        tap(window, "C")
+        v.draw_frame(0.0)
+        assert v.debug == mode and v.settings.points.color_by == mode
+        c = v.image[ids > 0].astype(float)
+        hues = np.unique(np.round(c / (c.sum(axis=1, keepdims=True) + 1), 2), axis=0)
+        assert len(hues) > 3, f"{mode}: one colour per patch / step expected, got {len(hues)} hues"
     tap(window, "C")
     assert v.debug == "material"
     tap(window, "B")   # the points variant supersamples: 4xSS

@@ -1,9 +1,9 @@
-// Debug colours of the mesh renderers (color_by 1: a colour per cluster, 2: a colour per LOD
+// Debug colours of the mesh renderers and the direct points (color_by 1: a colour per cluster or patch, 2: a colour per LOD
 // level), linear RGB, shaded like a material colour. Written in the snippet dialect
 // (kernels/README.md; vec3, VEC3, FRACT, ABS, FLOAT come from common/dialect.cl or
 // common/dialect.glsl, which the includer includes first), so the same text compiles as OpenCL C
 // (included by kernels/meshlod/raster.cl) and as GLSL 4.50 (the OpenGL draw of the cut).
-// numpy twin: paramlod/meshlod/raster_reference.py (cluster_color, level_color), bit for bit on
+// numpy twin: paramlod/core/debug_colors.py (cluster_color, level_color), bit for bit on
 // OpenCL: every operation is a plain IEEE one (no mix, no library hue functions), in this order.
 #ifndef PL_DEBUG_COLOR
 #define PL_DEBUG_COLOR
