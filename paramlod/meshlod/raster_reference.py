@@ -22,7 +22,7 @@ from paramlod.core.color import srgb8_thresholds
 from paramlod.core.layouts import CAMERA, INSTANCE_F, INSTANCE_U, camera_record
 from paramlod.renderers.shading import LIGHT
 from paramlod.core.debug_colors import cluster_color, level_color
-from paramlod.core.hashing import dither, hash32
+from paramlod.core.hashing import dither
 
 SUBPIXEL_BITS = 8            # snapping grid: 1/256 pixel
 GUARD_PIXELS = 2 ** 20       # guard band around the screen's centre; keeps edge functions < 2^60

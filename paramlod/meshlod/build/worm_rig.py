@@ -90,7 +90,7 @@ def shell(nu: int, nv: int, wall: float = 0.15, t: float = 0.0):
     parts_v, parts_n, parts_u, tris = [v, inner], [n, -n], [u, u], [f, f[:, ::-1] + nvx]
     at = 2 * nvx
     for i, normal in ((0, -tang[0]), (nu - 1, tang[-1])):   # mouth rim, tail rim: outer ring then inner ring
-        o, q = i * nv + j, nvx + i * nv + j
+        o = i * nv + j
         parts_v += [v[o], inner[o]]
         parts_n += [np.tile(normal, (nv, 1)), np.tile(normal, (nv, 1))]
         parts_u += [u[o], u[o]]
