@@ -17,6 +17,7 @@
 // makes no tests: its surfels draw every pixel (a group holds one instance).
 #pragma OPENCL FP_CONTRACT OFF
 #include "common/rows.cl"
+#include "meshlod/cut_common.cl"
 
 // the cut camera record, passed by value with the launch (no buffer write per frame)
 typedef struct { float v[CC_FLOATS]; } CutCamera;
@@ -33,15 +34,7 @@ inline float cut_proj(float e, float4 S, __global const float* m, float s, const
 
 // True when the bounding sphere (world centre, radius r * s) lies wholly outside one clip plane.
 inline bool cut_outside(float4 S, __global const float* m, float s, const float* cc) {
-    float3 w = rows_point(m, S.xyz);
-    float r = S.w * s;
-    bool out = false;
-    for (int k = 0; k < 6; ++k) {
-        const float* n = cc + CC_PLANES + 4 * k;
-        float dist = ((n[0] * w.x + n[1] * w.y) + n[2] * w.z) + n[3];
-        out |= dist < -r;
-    }
-    return out;
+    return planes_outside(rows_point(m, S.xyz), S.w * s, cc);
 }
 
 // meshoptimizer's cone rule in object space: the eye is brought there by M^-1 = (N^T, -N^T t).
@@ -65,14 +58,14 @@ void cluster_cut(__global const Cluster* clusters, uint first_cluster, uint n_cl
                  __global const float* weights, const CutCamera cam, uint mode,
                  __global uint2* selection, uint capacity, __global ulong* counters)
 {
-    __local uint l_sel, l_tri, l_fr, l_bf;
+    __local uint l_n[4];   // selected, their triangles, frustum-culled, backface-culled (cut_group_append)
     __local ulong l_base;
     uint inst = first_instance + (uint)get_global_id(1);
     // no early return: PoCL's work-group loops need every work-item to reach the barriers
     bool live = weights[inst] > 0.0f;
     const float* cc = cam.v;
     uint lid = get_local_id(0);
-    if (lid == 0) { l_sel = 0; l_tri = 0; l_fr = 0; l_bf = 0; }
+    if (lid == 0) { l_n[0] = 0u; l_n[1] = 0u; l_n[2] = 0u; l_n[3] = 0u; }
     barrier(CLK_LOCAL_MEM_FENCE);
 
     uint c = get_global_id(0);
@@ -88,29 +81,17 @@ void cluster_cut(__global const Cluster* clusters, uint first_cluster, uint n_cl
             draw = cut_proj(cl->parent_error, cl->parent_sphere, m, s, cc) > T;
         if (draw) {
             if ((mode & 1u) && cut_outside(cl->sphere, m, s, cc)) {
-                atomic_inc(&l_fr);
+                atomic_inc(&l_n[2]);
             } else if ((mode & 2u) && (inst_u[(size_t)inst * INST_U + INST_FLAGS] & CUT_SIMILAR)
                        && cut_backfacing(cl->cone_apex, cl->cone, I, cc)) {
-                atomic_inc(&l_bf);
+                atomic_inc(&l_n[3]);
             } else {
-                slot = atomic_inc(&l_sel);
-                atomic_add(&l_tri, cl->count);
+                slot = atomic_inc(&l_n[0]);
+                atomic_add(&l_n[1], cl->count);
             }
         }
     }
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (lid == 0) {
-        uint start = (uint)get_group_id(0) * CUT_LOCAL;
-        uint tests = start < n_clusters && live ? min((uint)CUT_LOCAL, n_clusters - start) : 0u;
-        l_base = l_sel ? atom_add(&counters[0], (ulong)l_sel) : 0;
-        if (l_tri) atom_add(&counters[1], (ulong)l_tri);
-        if (l_fr) atom_add(&counters[2], (ulong)l_fr);
-        if (l_bf) atom_add(&counters[3], (ulong)l_bf);
-        if (tests) atom_add(&counters[4], (ulong)tests);
-    }
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (slot != 0xFFFFFFFFu) {
-        ulong k = l_base + slot;
-        if (k < (ulong)capacity) selection[k] = (uint2)(inst, first_cluster + c);
-    }
+    uint start = (uint)get_group_id(0) * CUT_LOCAL;
+    uint tests = start < n_clusters && live ? min((uint)CUT_LOCAL, n_clusters - start) : 0u;
+    cut_group_append(l_n, &l_base, tests, slot, (uint2)(inst, first_cluster + c), selection, capacity, counters);
 }

@@ -14,7 +14,7 @@
 // hand-off weight is 0 selects nothing and makes no tests.
 #pragma OPENCL FP_CONTRACT OFF
 #include "common/rows.cl"
-#include "meshlod/planes.cl"
+#include "meshlod/cut_common.cl"
 
 typedef struct { float v[CC_FLOATS]; } CutCamera;
 
@@ -71,14 +71,14 @@ void skin_cull(__global const float4* spheres, __global const float4* cones, __g
                __global const float* weights, __global const float* skin, const CutCamera cam, uint mode,
                __global uint2* selection, uint capacity, __global ulong* counters)
 {
-    __local uint l_sel, l_tri, l_fr, l_bf;
+    __local uint l_n[4];   // selected, their triangles, frustum-culled, backface-culled (cut_group_append)
     __local ulong l_base;
     uint inst = first_instance + (uint)get_global_id(1);
     // no early return: PoCL's work-group loops need every work-item to reach the barriers
     bool live = weights[inst] > 0.0f;
     const float* cc = cam.v;
     uint lid = get_local_id(0);
-    if (lid == 0) { l_sel = 0; l_tri = 0; l_fr = 0; l_bf = 0; }
+    if (lid == 0) { l_n[0] = 0u; l_n[1] = 0u; l_n[2] = 0u; l_n[3] = 0u; }
     barrier(CLK_LOCAL_MEM_FENCE);
 
     uint c = get_global_id(0);
@@ -94,31 +94,19 @@ void skin_cull(__global const float4* spheres, __global const float4* cones, __g
             if (mode & 1u) {
                 float3 w = rows_point(I + INST_MODEL, rows_point(J, S.xyz));
                 float r = ((S.w * sr) * sc_scale(J)) * scales[inst];
-                if (planes_outside(w, r, cc)) { atomic_inc(&l_fr); drawn = false; }
+                if (planes_outside(w, r, cc)) { atomic_inc(&l_n[2]); drawn = false; }
             }
             if (drawn && (mode & 2u) && md.y == 0u && sc_backfacing(S, sr, cones[k], I, J, cc)) {
-                atomic_inc(&l_bf);
+                atomic_inc(&l_n[3]);
                 drawn = false;
             }
         }
         if (drawn) {
-            slot = atomic_inc(&l_sel);
-            atomic_add(&l_tri, md.z);
+            slot = atomic_inc(&l_n[0]);
+            atomic_add(&l_n[1], md.z);
         }
     }
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (lid == 0) {
-        uint start = (uint)get_group_id(0) * SC_LOCAL;
-        uint tests = start < n_meshlets && live ? min((uint)SC_LOCAL, n_meshlets - start) : 0u;
-        l_base = l_sel ? atom_add(&counters[0], (ulong)l_sel) : 0;
-        if (l_tri) atom_add(&counters[1], (ulong)l_tri);
-        if (l_fr) atom_add(&counters[2], (ulong)l_fr);
-        if (l_bf) atom_add(&counters[3], (ulong)l_bf);
-        if (tests) atom_add(&counters[4], (ulong)tests);
-    }
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (slot != 0xFFFFFFFFu) {
-        ulong k = l_base + slot;
-        if (k < (ulong)capacity) selection[k] = (uint2)(inst, first_cluster + c);
-    }
+    uint start = (uint)get_group_id(0) * SC_LOCAL;
+    uint tests = start < n_meshlets && live ? min((uint)SC_LOCAL, n_meshlets - start) : 0u;
+    cut_group_append(l_n, &l_base, tests, slot, (uint2)(inst, first_cluster + c), selection, capacity, counters);
 }

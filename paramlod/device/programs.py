@@ -98,6 +98,11 @@ def stop_timing() -> float:
     """Milliseconds the recorded kernels ran on the device (waits for them)."""
     global _timing
     events, _timing = _timing or [], None
+    return events_ms(events)
+
+
+def events_ms(events) -> float:
+    """Milliseconds the profiled ``events`` ran on the device, summed (waits for them)."""
     total = 0
     for e in events:
         e.wait()

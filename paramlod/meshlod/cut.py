@@ -16,7 +16,7 @@ import numpy as np
 import pyopencl as cl
 
 from paramlod.device.context import cl_device
-from paramlod.device.programs import kernel, launch
+from paramlod.device.programs import events_ms, kernel, launch
 from paramlod.errors import CapacityError, MeshError
 from paramlod.meshlod import cut_reference as ref
 from paramlod.meshlod.buffers import SIMILAR, DeviceMeshes
@@ -157,8 +157,4 @@ class ClusterCut:
 
     def device_ms(self) -> float:
         """Device milliseconds of the last enqueued cut (waits for it)."""
-        total = 0
-        for e in self.events:
-            e.wait()
-            total += e.profile.end - e.profile.start
-        return total * 1e-6
+        return events_ms(self.events)

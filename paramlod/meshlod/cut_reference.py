@@ -105,15 +105,20 @@ def projected_error(e, sphere, model, s, cc):
     return np.where(e[None, :] == 0, _F(0), p)
 
 
-def _frustum_culled(sphere, model, s, cc):
-    w = _point(model, sphere[:, :3])
-    r = sphere[None, :, 3] * s[:, None]
-    out = np.zeros(w.shape[:2], bool)
+def planes_outside(w, r, cc):
+    """kernels/meshlod/cut_common.cl's planes_outside: spheres of world centres ``w`` = (x, y, z)
+    arrays and radii ``r`` wholly outside one of the six planes of ``cc``."""
+    out = np.zeros(np.broadcast(w[0], r).shape, bool)
     for k in range(6):
         n = cc[CC_PLANES + 4 * k:CC_PLANES + 4 * k + 4]
-        dist = ((n[0] * w[..., 0] + n[1] * w[..., 1]) + n[2] * w[..., 2]) + n[3]
+        dist = ((n[0] * w[0] + n[1] * w[1]) + n[2] * w[2]) + n[3]
         out |= dist < -r
     return out
+
+
+def _frustum_culled(sphere, model, s, cc):
+    w = _point(model, sphere[:, :3])
+    return planes_outside((w[..., 0], w[..., 1], w[..., 2]), sphere[None, :, 3] * s[:, None], cc)
 
 
 def _backface_culled(apex, cone, model, normal, cc):

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from paramlod.device.context import cl_device
+from paramlod.device.programs import events_ms
 from paramlod.errors import MeshError
 from paramlod.meshlod.buffers import DeviceMeshes, MeshArrays, MeshInstances
 from paramlod.meshlod.cut import ClusterCut, Selection
@@ -146,7 +147,7 @@ class _Cuts:
         return self.skin_cull
 
     def ms(self) -> float:
-        return sum((e.profile.end - e.profile.start) * 1e-6 for e in self.skin_events)
+        return events_ms(self.skin_events)
 
 
 class Meshlets:
@@ -249,7 +250,7 @@ def _weights(dev, camera):
 
 def _mesh_stats(selection, cut_events, raster: dict, dev, weights=None, cuts=None) -> dict:
     c = selection.counts()
-    ms = sum((e.profile.end - e.profile.start) * 1e-6 for e in cut_events)
+    ms = events_ms(cut_events)
     out = {"clusters_drawn": c["selected"], "triangles_drawn": c["triangles"],
            "clusters_culled_frustum": c["culled_frustum"], "clusters_culled_backface": c["culled_backface"],
            "cluster_tests": c["tests"], "mesh_device_bytes": dev.nbytes + selection.nbytes,

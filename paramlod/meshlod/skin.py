@@ -14,7 +14,7 @@ import numpy as np
 import pyopencl as cl
 
 from paramlod.device.context import cl_device
-from paramlod.device.programs import kernel, launch
+from paramlod.device.programs import events_ms, kernel, launch
 from paramlod.errors import MeshError
 from paramlod.meshlod.buffers import DeviceMeshes
 from paramlod.meshlod.skin_reference import skin_records
@@ -74,11 +74,7 @@ class Skinning:
 
     def device_ms(self) -> float:
         """Device milliseconds of the last enqueued skinning (waits for it)."""
-        total = 0
-        for e in self.events:
-            e.wait()
-            total += e.profile.end - e.profile.start
-        return total * 1e-6
+        return events_ms(self.events)
 
 
 def read_vertices(dev: DeviceMeshes, first: int = 0, count: int | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -17,7 +17,7 @@ import numpy as np
 import pyopencl as cl
 
 from paramlod.device.context import cl_device
-from paramlod.device.programs import kernel, launch
+from paramlod.device.programs import events_ms, kernel, launch
 from paramlod.errors import MeshError
 from paramlod.meshlod import cut_reference as cref
 from paramlod.meshlod import skin_cull_reference as ref
@@ -114,8 +114,4 @@ class SkinCull:
 
     def device_ms(self) -> float:
         """Device milliseconds of the last enqueued cull (waits for it)."""
-        total = 0
-        for e in self.events:
-            e.wait()
-            total += e.profile.end - e.profile.start
-        return total * 1e-6
+        return events_ms(self.events)

@@ -12,7 +12,7 @@ M_i, largest scale s_i, the frame's float32 skin matrix J = J_p):
   ||J|| = sqrt(max row sum of |J3^T J3|) (Gershgorin on the Gram matrix: >= the largest singular
   value, so R >= the true bound |M_i J (q - c)| <= s_i sigma(J) |q - c|; equal for orthogonal
   columns, i.e. any T R S joint); culled when wholly outside one of the six planes of the cut
-  camera record (paramlod.meshlod.cut_reference.cut_camera; the test of kernels/meshlod/planes.cl);
+  camera record (paramlod.meshlod.cut_reference.cut_camera; the test of kernels/meshlod/cut_common.cl);
 * backface (class 0 only): in the principal joint's space (PBS, q = J^-1 M_i^-1 x) the meshlet lies
   in the sphere (c, r s_r) and its triangle normals within alpha of n at every time of the clip. The
   eye (homogeneous E, E_w = 1 perspective, 0 orthographic) is brought there exactly: mesh space by
@@ -31,7 +31,7 @@ import numpy as np
 
 from paramlod.core.layouts import INSTANCE_F
 from paramlod.errors import MeshError
-from paramlod.meshlod.cut_reference import CC_EYE, CC_PLANES, COUNTERS, cut_camera
+from paramlod.meshlod.cut_reference import CC_EYE, COUNTERS, cut_camera, planes_outside
 
 SLACK = 2.0 ** -12
 _F = np.float32
@@ -74,16 +74,6 @@ def scale_bound(J):
           for b in range(3)] for a in range(3)]
     rows = [(np.abs(g[a][0]) + np.abs(g[a][1])) + np.abs(g[a][2]) for a in range(3)]
     return np.sqrt(np.fmax(np.fmax(rows[0], rows[1]), rows[2]))
-
-
-def outside(w, r, cc):
-    """The six-plane test of kernels/meshlod/planes.cl: w = [x, y, z] arrays, r the radii."""
-    out = np.zeros(np.shape(r), bool)
-    for k in range(6):
-        n = cc[CC_PLANES + 4 * k:CC_PLANES + 4 * k + 4]
-        dist = ((n[0] * w[0] + n[1] * w[1]) + n[2] * w[2]) + n[3]
-        out |= dist < -r
-    return out
 
 
 def backfacing(S, sr, cone, model, normal, J, cc):
@@ -151,7 +141,7 @@ def select(bounds_list, slots, instances, skin, camera, cull_frustum=True, cull_
                 pj = rows_point3(J, [S[..., 0], S[..., 1], S[..., 2]])
                 w = rows_point3(model, pj)
                 r = ((S[..., 3] * sr) * scale_bound(J)) * s
-                fr = tested & outside(w, r, cc)
+                fr = tested & planes_outside(w, r, cc)
                 counts["culled_frustum"] += int(fr.sum())
                 draw &= ~fr
                 tested &= ~fr

@@ -120,6 +120,16 @@ def _check_placed(m, transforms, who: str) -> None:
         check_values(m @ transforms, f"{who}: transform @ transforms")
 
 
+def _mesh_model(who: str, material, transform) -> np.ndarray:
+    """A mesh object's model matrix, its material checked; ``who`` names the object in messages."""
+    if material is not None and not isinstance(material, Material):
+        raise SceneError(f"{who}: material must be a paramlod.Material, got {type(material).__name__}")
+    try:
+        return np.eye(4) if transform is None else _as_matrix(transform)
+    except SceneError as exc:
+        raise SceneError(f"{who}: {exc}") from None
+
+
 def _check_names(variant, aa) -> None:
     for name, value in (("variant", variant), ("aa", aa)):
         if value is not None and not (isinstance(value, str) and value.strip()):
@@ -254,12 +264,7 @@ class Scene:
         if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
             raise SceneError(f"mesh '{label}': instance count must be an integer of at least 1, got {count!r}")
         count = int(count)
-        if material is not None and not isinstance(material, Material):
-            raise SceneError(f"mesh '{label}': material must be a paramlod.Material, got {type(material).__name__}")
-        try:
-            m = np.eye(4) if transform is None else _as_matrix(transform)
-        except SceneError as exc:
-            raise SceneError(f"mesh '{label}': {exc}") from None
+        m = _mesh_model(f"mesh '{label}'", material, transform)
         if transforms is not None:
             try:
                 transforms = np.asarray(transforms, dtype=np.float64)
@@ -308,12 +313,7 @@ class Scene:
                     or not np.isfinite(time):
                 raise SceneError(f"skinned mesh '{label}': time must be a finite number of seconds or None, got {time!r}")
             time = float(time)
-        if material is not None and not isinstance(material, Material):
-            raise SceneError(f"skinned mesh '{label}': material must be a paramlod.Material, got {type(material).__name__}")
-        try:
-            m = np.eye(4) if transform is None else _as_matrix(transform)
-        except SceneError as exc:
-            raise SceneError(f"skinned mesh '{label}': {exc}") from None
+        m = _mesh_model(f"skinned mesh '{label}'", material, transform)
         if abs(np.linalg.det(m[:3, :3])) < 1e-20:
             raise SceneError(f"skinned mesh '{label}': the transform is singular (it flattens the mesh); give an invertible one")
         key = (source_key(source), "skinned", animation if not isinstance(animation, np.integer) else int(animation))

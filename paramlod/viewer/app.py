@@ -221,15 +221,9 @@ class Viewer:
 
     def on_key(self, name: str, pressed: bool) -> None:
         action = self.controls.key(name, pressed)
-        if action is None:
+        if action is None or self.controls.camera_action(action):
             return
-        if action == "mode":
-            self.controls.toggle_mode()
-        elif action == "frame":
-            self.controls.frame_scene()
-        elif action == "reset":
-            self.controls.reset()
-        elif action == "variant":
+        if action == "variant":
             self._next_variant()
         elif action == "aa":
             self._next_aa()

@@ -190,6 +190,13 @@ class Controls:
             return None
         return ACTION_KEYS.get(name) if pressed else None
 
+    def camera_action(self, action: str | None) -> bool:
+        """Carry out a camera action of ``key`` ("mode", "frame", "reset"); False for any other."""
+        do = {"mode": self.toggle_mode, "frame": self.frame_scene, "reset": self.reset}.get(action)
+        if do is not None:
+            do()
+        return do is not None
+
     def step(self, dt: float) -> bool:
         """Advance the held keys by ``dt`` seconds (fly mode; in orbit mode W/S zoom)."""
         if self.mode == "fly":

@@ -69,12 +69,7 @@ class FrameDriver:
         elif kind in ("key_down", "key_up"):
             name = key_name(str(event.get("key", "")))
             action = self.controls.key(name, kind == "key_down")
-            if action == "mode":
-                self.controls.toggle_mode()
-            elif action == "frame":
-                self.controls.frame_scene()
-            elif action == "reset":
-                self.controls.reset()
+            self.controls.camera_action(action)
             self.last = time.perf_counter()
             return action in WIDGET_ACTIONS or name not in ACTION_KEYS
         return False
