@@ -97,11 +97,11 @@ class MeshInstances:
 
     @classmethod
     def pack(cls, objects, mesh_index) -> "MeshInstances":
-        """``objects``: MeshObjects (paramlod.scene.scene); ``mesh_index(mesh) -> int``, called once per
-        object in order (a skinned object's index is its own, not its mesh's)."""
+        """``objects``: MeshObjects (paramlod.scene.scene); ``mesh_index(object) -> int``: the index in
+        MeshArrays of the object's mesh (a skinned object's is its own copy, not its mesh's)."""
         fs, us, ms, ss, batches, handoffs, at = [], [], [], [], [], [], 0
         for o in objects:
-            mi = mesh_index(o.mesh)
+            mi = mesh_index(o)
             if getattr(o, "handoff", None) is not None:
                 handoffs.append((at, o.handoff))
             models = np.broadcast_to(o.transform, (o.count, 4, 4)) if o.transforms is None else o.transform @ o.transforms

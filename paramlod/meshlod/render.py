@@ -79,20 +79,19 @@ class _MeshUploads:
 
     def update(self, scene) -> DeviceMeshes:
         if scene._version != self._version:
+            def key(o):   # a skinned object has a pose of its own: its own copy of the vertices
+                return ("object", id(o)) if isinstance(o.mesh, SkinnedMesh) else id(o.mesh)
+
             index: dict = {}
-            meshes, objects, skinned = [], [], []
+            meshes, skinned = [], []
             for o in scene.meshes:
-                # a skinned object has a pose of its own: its own copy of the vertices
-                key = ("object", id(o)) if isinstance(o.mesh, SkinnedMesh) else id(o.mesh)
-                if key not in index:
-                    index[key] = len(meshes)
+                if key(o) not in index:
+                    index[key(o)] = len(meshes)
                     meshes.append(o.mesh)
                     if isinstance(o.mesh, SkinnedMesh):
                         skinned.append(o)
-                objects.append(key)
-            keys = iter(objects)
             arrays = MeshArrays.pack(meshes)
-            instances = MeshInstances.pack(scene.meshes, lambda m: index[next(keys)])
+            instances = MeshInstances.pack(scene.meshes, lambda o: index[key(o)])
             self.dev = DeviceMeshes(arrays, instances)
             self.skinned = skinned   # in slot order (mesh order)
             self._version = scene._version
@@ -248,7 +247,7 @@ def _weights(dev, camera):
     return w
 
 
-def _mesh_stats(selection, cut_events, raster: dict, dev, weights=None, cuts=None) -> dict:
+def _mesh_stats(selection, cut_events, raster: dict, dev, weights, cuts) -> dict:
     c = selection.counts()
     ms = events_ms(cut_events)
     out = {"clusters_drawn": c["selected"], "triangles_drawn": c["triangles"],
@@ -264,9 +263,8 @@ def _mesh_stats(selection, cut_events, raster: dict, dev, weights=None, cuts=Non
     if dev.skin.slots:
         out["skinned_objects"] = len(dev.skin.slots)
         out["skinned_vertices"] = int(sum(sl.count for sl in dev.skin.slots))
-        out["ms"]["skin"] = cuts.ms() if cuts is not None else 0.0
-        if cuts is not None:
-            out["skin_cull"] = cuts.last_cull   # "skin_cull" (the clip's bounds) or "none" (culling off)
+        out["ms"]["skin"] = cuts.ms()
+        out["skin_cull"] = cuts.last_cull   # "skin_cull" (the clip's bounds) or "none" (culling off)
     return out
 
 

@@ -175,7 +175,7 @@ def scene_of(objects):
             meshes.append(o.mesh)
     index = {id(m): k for k, m in enumerate(meshes)}
     arrays = MeshArrays.pack(meshes)
-    instances = MeshInstances.pack(objects, lambda m: index[id(m)])
+    instances = MeshInstances.pack(objects, lambda o: index[id(o.mesh)])
     return arrays, instances
 
 

@@ -47,7 +47,7 @@ def drawer(objects) -> MeshDraw:
     meshes = list({id(o.mesh): o.mesh for o in objects}.values())   # MeshLod is not hashable
     index = {id(m): k for k, m in enumerate(meshes)}
     d = MeshDraw()
-    d.upload(MeshArrays.pack(meshes), MeshInstances.pack(objects, lambda m: index[id(m)]))
+    d.upload(MeshArrays.pack(meshes), MeshInstances.pack(objects, lambda o: index[id(o.mesh)]))
     return d
 
 

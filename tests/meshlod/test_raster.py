@@ -69,7 +69,7 @@ class Scene:
         for o in self.objects:
             if not any(o.mesh is m for m in meshes):
                 meshes.append(o.mesh)
-        index = lambda mesh: next(i for i, m in enumerate(meshes) if m is mesh)  # noqa: E731
+        index = lambda o: next(i for i, m in enumerate(meshes) if m is o.mesh)  # noqa: E731
         self.arrays = MeshArrays.pack(meshes)
         self.instances = MeshInstances.pack(self.objects, index)
         self.dev = DeviceMeshes(self.arrays, self.instances)

@@ -49,8 +49,8 @@ def _single_slot_mesh(v, nn, j, w, m):
 def _device(meshes):
     arrays = MeshArrays.pack(meshes)
     objs = [MeshObject(mm, np.eye(4), Material(), k + 1) for k, mm in enumerate(meshes)]
-    it = iter(range(len(meshes)))
-    instances = MeshInstances.pack(objs, lambda _m: next(it))
+    own = {id(o): k for k, o in enumerate(objs)}   # each object its own mesh
+    instances = MeshInstances.pack(objs, lambda o: own[id(o)])
     return DeviceMeshes(arrays, instances)
 
 

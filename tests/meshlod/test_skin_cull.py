@@ -52,8 +52,8 @@ def scene():
     rng = np.random.default_rng(0)
     objs = [MeshObject(gentle, np.eye(4), Material(), 1, count=4, transforms=_models(rng, 4, 3.0)),
             MeshObject(wild, np.eye(4), Material(), 2, count=2, transforms=_models(rng, 2, 3.0))]
-    it = iter(range(2))
-    instances = MeshInstances.pack(objs, lambda _m: next(it))
+    own = {id(o): k for k, o in enumerate(objs)}   # each object its own mesh
+    instances = MeshInstances.pack(objs, lambda o: own[id(o)])
     dev = DeviceMeshes(MeshArrays.pack(meshes), instances)
     classes = np.concatenate([b.classes for b in bounds])
     assert set(classes.tolist()) == {0, 1, 2}, "the scene should hold every class"
