@@ -106,7 +106,7 @@ void points_lfb(__global const RenderPatch* patches, __global const int4* rects,
                 __global const float* inst_f, __global const uint* inst_u,
                 __global const float* params, __global const float4* materials,
                 __global const float* cam, __global const float* light,
-                float factor, uint use_extent, float widen, uint max_side,
+                float factor, uint measure, float widen, uint max_side,
                 __global const uint* lin, __global const uint* thr,
                 __global ulong* color_buf, __global ulong* aux_buf, __global ulong* counters
 #ifdef PL_RECORD
@@ -143,7 +143,7 @@ void points_lfb(__global const RenderPatch* patches, __global const int4* rects,
         for (uint i = lid; i < m; i += PL_LOCAL) {
             uint pid = pairs[off + c0 + i];
             RenderPatch rp = patches[pid];
-            PointGrid g = point_grid(rp, inst_f + rp.inst * INST_F, factor, use_extent, widen, max_side);
+            PointGrid g = point_grid(rp, inst_f + rp.inst * INST_F, factor, measure, widen, max_side);
             int4 r = rects[pid];
             cg[i] = g; cpid[i] = pid; cinst[i] = rp.inst;
             cfirst[i] = (r.x == tx && r.y == ty) ? 1u : 0u;  // per-patch statistics counted once

@@ -171,7 +171,7 @@ class LocalFramebufferRenderer:
                 k_render(q, (n_tiles * self.local_size,), (self.local_size,),
                          patches_buf, self.rects, self.tile_offset.data, self.tile_count.data, self.pairs,
                          np.uint32(tiles_x), *inst, materials_buf, cam_buf, light_buf,
-                         settings.factor(), np.uint32(settings.use_extent), np.float32(settings.widen),
+                         settings.factor(), settings.measure(boundary=False), np.float32(settings.widen),
                          np.uint32(settings.max_side), self.lin.data, self.thr.data,
                          keys.color, keys.aux, self.counters, *record_args)
         cl.enqueue_copy(q, counters, self.counters)
