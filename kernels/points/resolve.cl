@@ -4,8 +4,10 @@
 // encode_srgb8 and the lin/thr tables). Driven by paramlod.renderers.targets.KeyBuffer; numpy
 // twin of the image and counters: paramlod.renderers.points_reference.resolve_image.
 //
-// counts[0]: pixels written (any sample); counts[1]: covered subsamples, rint(alpha * PL_SS_COUNT)
-// summed (alpha = coverage of a supersampled frame; PL_SS_COUNT = 1 otherwise).
+// counts[2 v]: pixels of layer v written (any sample); counts[2 v + 1]: its covered subsamples,
+// rint(alpha * PL_SS_COUNT) summed (alpha = coverage of a supersampled frame; PL_SS_COUNT = 1
+// otherwise). Layers (the views of a multi-view frame) follow one another, n pixels each; the host
+// launches whole work-groups per layer, so a work-group counts into one layer's record.
 
 #ifndef PL_SS_COUNT
 #define PL_SS_COUNT 1
@@ -21,8 +23,11 @@ void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uin
     __local uint written, covered;
     if (get_local_id(0) == 0) { written = 0u; covered = 0u; }
     barrier(CLK_LOCAL_MEM_FENCE);
-    uint i = get_global_id(0);
-    if (i < n) {
+    uint groups_per_layer = (n + RESOLVE_LOCAL - 1u) / RESOLVE_LOCAL;
+    uint layer = get_group_id(0) / groups_per_layer;
+    uint in_layer = (get_group_id(0) % groups_per_layer) * RESOLVE_LOCAL + get_local_id(0);
+    if (in_layer < n) {
+        uint i = layer * n + in_layer;
         ulong k = color_buf[i];
         if (k == 0xFFFFFFFFFFFFFFFFul) {
             color[i] = (float4)(0.0f); depth[i] = INFINITY; normal[i] = (float4)(0.0f); object_id[i] = 0u;
@@ -63,7 +68,7 @@ void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uin
     }
     barrier(CLK_LOCAL_MEM_FENCE);
     if (get_local_id(0) == 0) {
-        if (written) atomic_add(&counts[0], written);
-        if (covered) atomic_add(&counts[1], covered);
+        if (written) atomic_add(&counts[2u * layer], written);
+        if (covered) atomic_add(&counts[2u * layer + 1u], covered);
     }
 }

@@ -53,6 +53,9 @@ class Camera:
     size: tuple[int, int]   # (width, height) in pixels
     near: float = 0.01
     far: float = 1000.0
+    # off-axis lens shift in normalised device coordinates (added to x and y after the divide):
+    # the views of a light-field quilt or of a stereo pair share one focal plane this way
+    shift: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
         try:
@@ -71,9 +74,15 @@ class Camera:
             raise SceneError(f"camera: need 0 < near < far, got near={self.near}, far={self.far}")
         if self.far > PLACE_LIMIT:
             raise SceneError(f"camera: far must be at most {PLACE_LIMIT:.0e}, got {self.far:.3g}")
+        try:
+            sx, sy = self.shift
+        except (TypeError, ValueError):
+            raise SceneError(f"camera: shift must be two numbers (NDC x, y), got {self.shift!r}") from None
+        self.shift = (_number(sx, "shift x"), _number(sy, "shift y"))
 
     @classmethod
-    def look_at(cls, eye, target, up=(0, 1, 0), fov_y=45.0, size=(640, 480), near=0.01, far=1000.0):
+    def look_at(cls, eye, target, up=(0, 1, 0), fov_y=45.0, size=(640, 480), near=0.01, far=1000.0,
+                shift=(0.0, 0.0)):
         eye, target, up = (check_values(x, f"camera: {n}").reshape(-1)
                            for x, n in ((eye, "eye"), (target, "target"), (up, "up")))
         for x, n in ((eye, "eye"), (target, "target"), (up, "up")):
@@ -93,7 +102,7 @@ class Camera:
         view = np.eye(4)
         view[0, :3], view[1, :3], view[2, :3] = s, u, -f
         view[:3, 3] = -view[:3, :3] @ eye
-        return cls(view, fov_y, size, near, far)
+        return cls(view, fov_y, size, near, far, shift)
 
     @property
     def width(self) -> int:
@@ -118,11 +127,13 @@ class Camera:
         p[2, 2] = (fa + n) / (n - fa)
         p[2, 3] = 2 * fa * n / (n - fa)
         p[3, 2] = -1.0
+        # x_ndc = p00 x / -z - p02: a shift s moves the image by +s
+        p[0, 2], p[1, 2] = -self.shift[0], -self.shift[1]
         return p
 
     def with_size(self, size) -> "Camera":
         """The same view at another image size (the aspect ratio follows)."""
-        return Camera(self.view.copy(), self.fov_y, size, self.near, self.far)   # checked as any camera
+        return Camera(self.view.copy(), self.fov_y, size, self.near, self.far, self.shift)   # checked as any camera
 
 
 # --- camera and geometry facts shared by the surfel prefix law and the surfel -> mesh hand-off ---------

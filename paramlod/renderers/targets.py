@@ -1,7 +1,10 @@
 """The shared 64-bit key buffers every point producer writes into, and their resolve to a Frame.
 
 Two ulong buffers of width x height (kernels/keys.cl): the colour key (depth | sRGB RGBA8) and the
-aux key (depth | octahedral normal | object id). Renderers only ever atom_min into them.
+aux key (depth | octahedral normal | object id). Renderers only ever atom_min into them. A
+multi-view frame (``paramlod.render_views``) has ``layers`` of them one after another: pixel (x, y)
+of view v is key ``v * width * height + y * width + x``, so the resolve and the downsample treat the
+layers as one tall image and never mix two views in one work-group or block.
 ``Downsample`` resolves a supersampled KeyBuffer block by block into one of the frame's size.
 """
 from __future__ import annotations
@@ -28,23 +31,28 @@ class KeyBuffer:
     it keeps until it is dropped: a frame still alive when the next one is drawn (``f = render(...)``
     in a loop) keeps its own arrays without copying them, at the cost of device memory."""
 
-    def __init__(self, width: int, height: int, ss: int = 1):
-        self.width, self.height, self.ss = int(width), int(height), int(ss)
-        n = self.width * self.height
+    def __init__(self, width: int, height: int, ss: int = 1, layers: int = 1):
+        self.width, self.height, self.ss, self.layers = int(width), int(height), int(ss), int(layers)
+        n = self.width * self.height * self.layers
         ctx = cl_device().context
         self.color = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self.aux = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, n * 8)
         self._free: list[_Outputs] = []   # output sets no Frame holds
         self._last: _Outputs | None = None
         self._count_buf = None
-        self._counts = np.zeros(2, np.uint32)
+        self._counts = np.zeros((self.layers, 2), np.uint32)   # per layer (resolve.cl)
         # pinned host arrays the resolved arrays are copied through: a copy into pageable memory
         # measured 0.35 GB/s on an H200 (17 ms for a 1080p image)
         self._staging: dict[int, np.ndarray] = {}
 
     @property
-    def pixel_count(self) -> int:
+    def layer_pixels(self) -> int:
         return self.width * self.height
+
+    @property
+    def pixel_count(self) -> int:
+        """Keys in all layers."""
+        return self.width * self.height * self.layers
 
     def clear(self):
         """Clear the keys to all ones."""
@@ -54,9 +62,10 @@ class KeyBuffer:
         cl.enqueue_fill_buffer(q, self.aux, ones, 0, self.pixel_count * 8)
 
     def read_keys(self) -> tuple[np.ndarray, np.ndarray]:
-        """The raw colour and aux keys, uint64 (h, w) each."""
+        """The raw colour and aux keys, uint64 (h, w) each ((layers, h, w) with several layers)."""
         q = cl_device().queue
-        c = np.empty((self.height, self.width), np.uint64)
+        shape = (self.height, self.width) if self.layers == 1 else (self.layers, self.height, self.width)
+        c = np.empty(shape, np.uint64)
         a = np.empty_like(c)
         cl.enqueue_copy(q, c, self.color)
         cl.enqueue_copy(q, a, self.aux)
@@ -74,14 +83,15 @@ class KeyBuffer:
         counters on the device (returns the kernel's event). ``background``: linear RGB the image
         is composited over. A supersampled buffer is only downsampled, never resolved."""
         if self._count_buf is None:
-            self._count_buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8)
+            self._count_buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, self._counts.nbytes)
         out = self._free.pop() if self._free else _Outputs(self)
         out.set_background(background)
         self._last = out
         q = cl_device().queue
-        cl.enqueue_fill_buffer(q, self._count_buf, np.uint32(0), 0, 8)
-        n = self.pixel_count
-        return launch(q, out.kernel, ((n + 255) // 256 * 256,), (256,))
+        cl.enqueue_fill_buffer(q, self._count_buf, np.uint32(0), 0, self._counts.nbytes)
+        # whole work-groups per layer (resolve.cl), so each counts into its own layer's record
+        per_layer = (self.layer_pixels + 255) // 256 * 256
+        return launch(q, out.kernel, (per_layer * self.layers,), (256,))
 
     def read_counts(self):
         """Enqueue the copy of the resolve's counters (read after the frame's wait: ``counts``)."""
@@ -89,8 +99,15 @@ class KeyBuffer:
 
     @property
     def counts(self) -> dict:
-        """{"pixels_written", "covered_subsamples"} of the last resolve (after the frame's wait)."""
-        return {"pixels_written": int(self._counts[0]), "covered_subsamples": int(self._counts[1])}
+        """{"pixels_written", "covered_subsamples"} of the last resolve, all layers together
+        (after the frame's wait)."""
+        total = self._counts.sum(axis=0, dtype=np.int64)
+        return {"pixels_written": int(total[0]), "covered_subsamples": int(total[1])}
+
+    def layer_counts(self, layer: int) -> dict:
+        """``counts`` of one layer (one view of a multi-view frame)."""
+        c = self._counts[layer]
+        return {"pixels_written": int(c[0]), "covered_subsamples": int(c[1])}
 
     def staging(self, slot: int, shape, dtype) -> np.ndarray:
         """A pinned host array (mapped once, kept) for reading resolved array ``slot``."""
@@ -105,14 +122,30 @@ class KeyBuffer:
 
     def frame(self, background=None) -> Frame:
         """A Frame that reads the last resolve lazily; its output buffers return to this key
-        buffer when the Frame is dropped."""
+        buffer when the Frame is dropped. One layer only (else ``frames``)."""
+        if self.layers != 1:
+            raise ValueError(f"KeyBuffer.frame: {self.layers} layers make {self.layers} frames (use frames())")
+        return self.frames(background)[0]
+
+    def frames(self, background=None) -> list[Frame]:
+        """One lazy Frame per layer of the last resolve; the output buffers return to this key
+        buffer when every one of them is dropped."""
         out, self._last = self._last, None
         if out is None:
             raise ValueError("KeyBuffer.frame: resolve_on_device first (each resolve makes one Frame)")
-        frame = Frame(source=_ResolvedArrays(self, out), size=(self.width, self.height),
-                      background=out.background if background is None else background)
-        weakref.finalize(frame, self._free.append, out)
-        return frame
+        holder = _Held(out)
+        frames = [Frame(source=_ResolvedArrays(self, out, layer, holder), size=(self.width, self.height),
+                        background=out.background if background is None else background)
+                  for layer in range(self.layers)]
+        weakref.finalize(holder, self._free.append, out)
+        return frames
+
+
+class _Held:
+    """What the Frames of one resolve share: their output set returns when it is dropped."""
+
+    def __init__(self, out):
+        self.out = out
 
 
 class _Outputs:
@@ -125,8 +158,8 @@ class _Outputs:
         lin, thr = srgb_device_tables()
         self.kernel = cl.Kernel(build(["common/keys.cl", "points/subsamples.cl", "points/resolve.cl"],
                                       defines={"PL_SS_COUNT": keys.ss * keys.ss}), "resolve")
-        self.kernel.set_args(keys.color, keys.aux, np.uint32(n), *self.bufs, np.uint32(0), lin.data, thr.data,
-                             keys._count_buf)
+        self.kernel.set_args(keys.color, keys.aux, np.uint32(keys.layer_pixels), *self.bufs, np.uint32(0),
+                             lin.data, thr.data, keys._count_buf)
         self.background = None
 
     def set_background(self, background):
@@ -143,15 +176,16 @@ class _ResolvedArrays:
     _SLOTS = {"color": (0, np.float32, 4), "depth": (1, np.float32, 0), "normal": (2, np.float32, 4),
               "object_id": (3, np.uint32, 0), "image": (4, np.uint8, 3)}
 
-    def __init__(self, keys: KeyBuffer, out: _Outputs):
+    def __init__(self, keys: KeyBuffer, out: _Outputs, layer: int = 0, holder=None):
         self.keys, self.out, self.background = keys, out, out.background
+        self.layer, self.holder = layer, holder
 
     def read(self, name: str) -> np.ndarray:
         k = self.keys
         slot, dtype, channels = self._SLOTS[name]
         shape = (k.height, k.width, channels) if channels else (k.height, k.width)
         staged = k.staging(slot, shape, dtype)
-        cl.enqueue_copy(cl_device().queue, staged, self.out.bufs[slot])
+        cl.enqueue_copy(cl_device().queue, staged, self.out.bufs[slot], src_offset=self.layer * staged.nbytes)
         return np.array(staged[..., :3] if name == "normal" else staged)
 
 
@@ -176,11 +210,12 @@ class Downsample:
         self._bound = None
 
     def enqueue(self, src: KeyBuffer, dst: KeyBuffer):
-        """Enqueue the downsample of ``src`` into ``dst`` (returns the kernel's event)."""
-        if (src.width, src.height) != (dst.width * self.ss, dst.height * self.ss):
+        """Enqueue the downsample of ``src`` into ``dst`` (returns the kernel's event); layers are
+        rows of one tall image, and a block never spans two of them (ss divides a layer's height)."""
+        if (src.width, src.height, src.layers) != (dst.width * self.ss, dst.height * self.ss, dst.layers):
             raise ValueError(f"downsample by {self.ss}: {src.width}x{src.height} keys do not make "
                              f"{dst.width}x{dst.height} pixels")
-        args = (src.color, src.aux, np.uint32(dst.width), np.uint32(dst.height), *(t.data for t in self.tables),
+        args = (src.color, src.aux, np.uint32(dst.width), np.uint32(dst.height * dst.layers), *(t.data for t in self.tables),
                 dst.color, dst.aux)
         if args != self._bound:
             self.kernel.set_args(*args)
