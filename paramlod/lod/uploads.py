@@ -1,12 +1,13 @@
-"""Device copies of a scene's parametric instance buffers and of each frame's camera record:
+"""Device copies of a scene's parametric instance buffers and of each frame's camera records:
 what the LOD stage and the parametric renderers read (per scene; re-sent only when the scene or
-its time changed)."""
+its time changed). A multi-view frame (a ``paramlod.core.views.Views``) sends one camera record
+per view, one after another."""
 from __future__ import annotations
 
 import pyopencl as cl
 import pyopencl.array as cla
 
-from paramlod.core.layouts import CAMERA_FLOATS, camera_record
+from paramlod.core.views import as_views
 from paramlod.device.context import cl_device
 
 
@@ -17,7 +18,8 @@ class SceneBuffers:
         self._cam_buf = self._cam_host = None
 
     def upload(self, scene, camera) -> dict:
-        """{"inst": (floats, uints, params), "materials", "light", "domains" (host), "cam"}."""
+        """{"inst": (floats, uints, params), "materials", "light", "domains" (host), "cam" (the
+        camera records), "n_views"}; ``camera``: a Camera or a Views."""
         q = cl_device().queue
         key = (scene._version, scene.time)
         if key != self._key:
@@ -29,9 +31,11 @@ class SceneBuffers:
                 "domains": inst_f[:, 28:32],
             }
             self._key = key
-        if self._cam_buf is None:
-            self._cam_buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, CAMERA_FLOATS * 4)
+        views = as_views(camera)
+        records = views.records()
+        if self._cam_buf is None or self._cam_buf.size < records.nbytes:
+            self._cam_buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, records.nbytes)
         # not waited for: every frame ends with a wait, so the host copy is free to change then
-        self._cam_host = camera_record(camera)
+        self._cam_host = records
         cl.enqueue_copy(q, self._cam_buf, self._cam_host, is_blocking=False)
-        return dict(self._dev, cam=self._cam_buf)
+        return dict(self._dev, cam=self._cam_buf, n_views=len(views))

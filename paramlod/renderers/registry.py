@@ -13,6 +13,11 @@ Every renderer follows one protocol, driven by ``paramlod.pipeline``:
 returns its Frame), ``collect()`` (enqueue the copies of its counters), then, after the driver's
 one wait, ``grow(settings)`` (True if a buffer grew and the frame must be drawn again) and
 ``stats()`` (its counters and device times).
+
+Multi-view frames (``paramlod.render_views``): a renderer registered with ``multiview=True`` is
+given a ``paramlod.core.views.Views`` as its camera (N cameras of one size); a "keys" renderer
+draws view v into layer v of the layered key buffers (``KeyBuffer.layers``), a "gl" renderer
+returns one Frame per view. ``stats()`` may add ``"views"``: one dict of counters per view.
 """
 from __future__ import annotations
 
@@ -51,6 +56,7 @@ class RendererSpec:
     settings_type: type = object   # the class of those settings
     description: str = ""
     takes_aa: str = "ss"   # the part of an AA mode it takes: "ss" (supersampling only) or "all"
+    multiview: bool = False   # draws several views from one LOD pass (render_views)
 
 
 KINDS: dict[str, ObjectKind] = {}
