@@ -6,6 +6,13 @@ distance d gives r = s * pixel(d) / 2, where pixel(d) is the world size of one p
 (2 d / (P[1,1] H) for a perspective camera, 2 / (P[1,1] H) for an orthographic one). Discs are drawn
 with radius r, so a size of 2 px means discs 2 px across whose centres are 1 px apart. When the law
 asks for more surfels than the set has, the whole set is drawn with its own spacing (larger discs).
+
+Several views (``paramlod.render_views``: a Views, layered key buffers): the object draws the
+longest prefix any view that sees it asks for (a view that draws none of it, outside its frustum
+or left wholly to the hand-off mesh, asks for nothing), and each surfel, read once, is splatted
+into every view whose frustum holds it with that view's own disc radius. A view's discs are then
+those of its single-view frame plus more of the same size: never less coverage, and the same keys
+where its own law asks for the same prefix.
 """
 from __future__ import annotations
 
@@ -20,7 +27,7 @@ import pyopencl as cl
 from paramlod.core.camera import Camera, pixel_world_size, sphere_depth, transform_scale  # noqa: F401
 from paramlod.core.color import srgb_to_linear
 from paramlod.core.frame import FrameStats
-from paramlod.core.layouts import camera_record
+from paramlod.core.views import Views, as_views
 from paramlod.device.context import cl_device
 from paramlod.device.programs import kernel
 from paramlod.renderers.registry import ObjectKind, RendererSpec, register_kind, register_renderer
@@ -36,7 +43,8 @@ LOCAL = 64
 # IEEE float division and sqrt, as numpy does: the splat kernel's coverage and depth keys must match
 # its numpy twin bit for bit, and NVIDIA's default division is not correctly rounded
 EXACT_DIVISION = ("-cl-fp32-correctly-rounded-divide-sqrt",)
-COUNTERS = ("surfels_drawn", "atomics", "pixels_covered", "surfels_not_finite")
+COUNTERS = ("surfels_drawn", "atomics", "pixels_covered", "surfels_not_finite")   # per view
+VIEW_FLOATS = 42   # the splat's draw record per view (kernels/surfels/surfels_splat.cl SF_VIEW_FLOATS)
 
 
 @dataclass
@@ -109,8 +117,9 @@ def object_depth(camera, surfels: SurfelSet, transform) -> float:
     return sphere_depth(camera, c, r, transform)
 
 
-def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None) -> dict:
-    """The prefix length and disc radius (object units) a strategy asks for."""
+def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None, bounds=None) -> dict:
+    """The prefix length and disc radius (object units) a strategy asks for. ``bounds``: the set's
+    bounding sphere held once (a _Sphere), else it is measured here."""
     strategy = strategy or FixedSize()
     transform = np.eye(4) if transform is None else np.asarray(transform, np.float64)
     N = len(surfels)
@@ -119,7 +128,7 @@ def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None) -> 
         r = surfels.spacing(n)
         return {"prefix": n, "radius": r, "size_px": None, "saturated": strategy.count > N}
     size = strategy.size()
-    r, depth = prefix_radius(camera, surfels, size, transform)   # object units; the hand-off's weight uses it too
+    r, depth = prefix_radius(camera, bounds or surfels, size, transform)   # object units; the hand-off's weight uses it too
     n = surfels.prefix_for_spacing(r)
     # asking for N (1 + 1e-9) surfels is asking for N: the camera's roundoff must not flip it
     saturated = surfels.packing / (r * r) > N * (1 + 1e-9)
@@ -127,8 +136,35 @@ def choose_prefix(surfels: SurfelSet, camera, strategy=None, transform=None) -> 
             "saturated": bool(saturated), "distance": depth}
 
 
+class _Sphere:
+    """What prefix_radius reads of a set, its bounding sphere, measured once: the measure is a pass
+    over every surfel (22 ms for 200k), and a multi-view frame asks for it once per view."""
+
+    def __init__(self, surfels: SurfelSet):
+        self._sphere = surfels.bounding_sphere()
+
+    def bounding_sphere(self):
+        return self._sphere
+
+
+def sees(views: Views, centre, radii, transform) -> np.ndarray:
+    """bool per view: whether an object-space sphere (``radii``: its radius in each view) placed by
+    ``transform`` may reach a pixel of the view: not wholly beyond far or before near, nor wholly
+    outside a side of the image widened by 2 pixels (the splat keeps discs up to a pixel outside)."""
+    m = np.stack([c.view for c in views]) @ np.asarray(transform, np.float64)
+    cv = np.concatenate([m[:, :3, :3] @ np.asarray(centre, np.float64) + m[:, :3, 3], np.ones((len(views), 1))], axis=1)
+    rad = np.asarray(radii, np.float64) * transform_scale(transform)
+    near, far = np.array([c.near for c in views]), np.array([c.far for c in views])
+    p = np.stack([c.projection for c in views])
+    kx, ky = 1.0 + 4.0 / views.width, 1.0 + 4.0 / views.height
+    planes = np.stack([kx * p[:, 3] + p[:, 0], kx * p[:, 3] - p[:, 0], ky * p[:, 3] + p[:, 1], ky * p[:, 3] - p[:, 1]], axis=1)
+    inside = np.einsum("vpk,vk->vp", planes, cv) >= -rad[:, None] * np.linalg.norm(planes[:, :, :3], axis=2)
+    return inside.all(axis=1) & ~(-cv[:, 2] - rad > far) & ~(-cv[:, 2] + rad < near)
+
+
 class _DeviceSurfels:
     def __init__(self, s: SurfelSet):
+        self.bounds = _Sphere(s)
         n = len(s)
         pos = np.zeros((n, 4), np.float32)
         pos[:, :3] = s.positions
@@ -153,23 +189,50 @@ def draw_records(camera, transform):
     return xf, np.linalg.inv(camera.projection).astype(np.float32).reshape(-1)
 
 
-class _Splat:
-    """One surfel object's splat in flight: its kernel event and counters."""
+def view_records(views: Views, transform, radii, mesh_weights) -> np.ndarray:
+    """float32 (len(views) * VIEW_FLOATS,): per view draw_records, the disc radius in view units and
+    the mesh weight (1: the view draws none of the object)."""
+    out = np.zeros((len(views), VIEW_FLOATS), np.float32)
+    for v, camera in enumerate(views):
+        out[v, :24], out[v, 24:40] = draw_records(camera, transform)
+    out[:, 40], out[:, 41] = radii, mesh_weights
+    return out.reshape(-1)
 
-    def __init__(self, choice, strategy, n_surfels, radius_view, event, counters, cbuf):
-        self.choice, self.strategy, self.n_surfels, self.radius_view = choice, strategy, n_surfels, radius_view
+
+class _Splat:
+    """One surfel object's splat in flight: its kernel event and per-view counters. ``choices``:
+    each view's own law, ``lead`` the view whose prefix is drawn, ``drawn`` which views it is
+    splatted into, ``records`` the kernel's view records."""
+
+    def __init__(self, choices, lead, drawn, n, strategy, n_surfels, records, event, counters, cbuf):
+        self.choices, self.lead, self.drawn, self.n = choices, lead, drawn, n
+        self.strategy, self.n_surfels, self.records = strategy, n_surfels, records.reshape(-1, VIEW_FLOATS)
         self.event, self.counters, self.cbuf = event, counters, cbuf
 
+    def _per_view(self) -> np.ndarray:
+        return self.counters.reshape(-1, len(COUNTERS))
+
     def stats(self) -> dict:
+        """The lead view's law, the counters of all views together."""
         ms = (self.event.profile.end - self.event.profile.start) * 1e-6
-        return {**self.choice, "radius_view": float(self.radius_view), "surfels": self.n_surfels, "ms": ms,
-                **{k: int(v) for k, v in zip(COUNTERS, self.counters)}}
+        total = self._per_view().sum(axis=0, dtype=np.uint64)
+        return {**self.choices[self.lead], "radius_view": float(self.records[self.lead, 40]),
+                "surfels": self.n_surfels, "ms": ms, **{k: int(v) for k, v in zip(COUNTERS, total)},
+                "views_drawn": int(sum(self.drawn))}
+
+    def view_stats(self, v: int) -> dict:
+        """View v: its own law (``view_prefix``: the prefix it asks for), ``prefix`` the prefix
+        splatted into it (0 when it draws none of the object) and its counters."""
+        ch = self.choices[v]
+        return {**ch, "prefix": self.n if self.drawn[v] else 0, "view_prefix": ch["prefix"], "drawn": self.drawn[v],
+                "radius_view": float(self.records[v, 40]), "surfels": self.n_surfels,
+                **{k: int(c) for k, c in zip(COUNTERS, self._per_view()[v])}}
 
 
 class SurfelSplats:
     """The "surfels" renderer: each surfel object's prefix splatted into the shared key buffers
-    (composed by depth with the point variants). Device copies of the sets are kept here, per
-    scene, not on the sets."""
+    (composed by depth with the point variants), or, given a Views, view v into layer v.
+    Device copies of the sets are kept here, per scene, not on the sets."""
 
     def __init__(self, functions=(), record: bool = False):
         self._device: dict[int, tuple] = {}   # id(SurfelSet) -> (the set, its device copy)
@@ -188,41 +251,56 @@ class SurfelSplats:
         # computed here, each frame, for this pass's camera: the mesh renderer computes the same
         # weight for its instance (paramlod.scene.handoff), so the two split the pixels
         self._splats = [self.splat(target, self.camera, so.surfels, so.strategy or FixedSize(), so.transform,
-                                   so.object_id, so.specular, mesh_weight=mesh_weight(self.camera, so))
+                                   so.object_id, so.specular, mesh_weight=self._mesh_weight(so))
                         for so in self.objects]
 
+    def _mesh_weight(self, so):
+        if isinstance(self.camera, Views):   # each view's own share, as the mesh renderer's pass of that view
+            return [mesh_weight(c, so) for c in self.camera]
+        return mesh_weight(self.camera, so)
+
     def splat(self, keys, camera, surfels, strategy, transform, object_id, specular, light=None,
-              mesh_weight: float = 0.0) -> _Splat:
-        """Enqueue the splat of one set's prefix into ``keys`` (no wait). ``mesh_weight`` in
-        [0, 1]: the hand-off mesh's share; pixels whose dither is below it are left out (1: no
-        surfel is splatted)."""
-        if (keys.width, keys.height) != tuple(camera.size):
+              mesh_weight=0.0) -> _Splat:
+        """Enqueue the splat of one set's prefix into ``keys`` (no wait). ``camera``: a Camera, or
+        a Views and ``keys`` of one layer per view. ``mesh_weight`` in [0, 1], one for every view
+        or a list of one per view: the hand-off mesh's share; pixels whose dither is below it are
+        left out (1: no surfel is splatted)."""
+        views = as_views(camera)
+        if (keys.width, keys.height) != tuple(views.size):
             raise SurfelError(f"the key buffer is {keys.width}x{keys.height} but the camera is "
-                              f"{camera.size[0]}x{camera.size[1]}")
+                              f"{views.size[0]}x{views.size[1]}")
+        if keys.layers != len(views):
+            raise SurfelError(f"{len(views)} views need a key buffer of {len(views)} layers, got {keys.layers}")
         if not 0 <= int(object_id) <= 0xFFF:
             raise SurfelError(f"object_id must be in 0..4095 (12 bits of the aux key), got {object_id}")
         transform = np.eye(4) if transform is None else np.asarray(transform, np.float64)
         if transform.shape != (4, 4) or not np.all(np.isfinite(transform)) or abs(np.linalg.det(transform[:3, :3])) < 1e-12:
             raise SurfelError("surfel transform must be a finite, invertible 4x4 matrix")
-        w = float(mesh_weight)
-        if not 0.0 <= w <= 1.0:
-            raise SurfelError(f"mesh_weight must be in [0, 1] (the hand-off mesh's share of the pixels), "
-                              f"got {mesh_weight!r}")
-        choice = dict(choose_prefix(surfels, camera, strategy, transform), mesh_weight=w)
+        weights = _mesh_weights(mesh_weight, len(views))
         dev = self.device_copy(surfels)
+        choices = [dict(choose_prefix(surfels, c, strategy, transform, dev.bounds), mesh_weight=w)
+                   for c, w in zip(views, weights)]
+        centre, rad = dev.bounds.bounding_sphere()
+        # a view draws the object if the mesh leaves it pixels (weight 1: the mesh draws them all)
+        # and its frustum may hold a disc (the cube around a disc reaches sqrt(3) radii from its centre)
+        seen = sees(views, centre, [rad + 2.0 * ch["radius"] for ch in choices], transform)
+        drawn = [bool(w < 1.0 and s) for w, s in zip(weights, seen)]
+        lead = max(range(len(views)), key=lambda v: (drawn[v], choices[v]["prefix"], -v))
+        n = choices[lead]["prefix"] if drawn[lead] else 0
+        scale = transform_scale(transform)
+        records = view_records(views, transform, [np.float32(ch["radius"] * scale) for ch in choices],
+                               [w if d else 1.0 for w, d in zip(weights, drawn)])
         q, ctx = cl_device().queue, cl_device().context
-        xf, inv_proj = draw_records(camera, transform)
         mf = cl.mem_flags
-        small = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in
-                 (xf, camera_record(camera), inv_proj, np.asarray(LIGHT if light is None else light, np.float32))]
-        counters = np.zeros(len(COUNTERS), np.uint64)
+        view_buf, cam_buf, light_buf = (cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in
+                                        (records, views.records(), np.asarray(LIGHT if light is None else light, np.float32)))
+        counters = np.zeros(len(views) * len(COUNTERS), np.uint64)
         cbuf = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=counters)
-        n = 0 if w >= 1.0 else choice["prefix"]   # the mesh draws every pixel: nothing to splat
-        radius_view = np.float32(choice["radius"] * transform_scale(transform))
         k = kernel("surfels_splat", ["common/keys.cl", "surfels/surfels_splat.cl"], options=EXACT_DIVISION)
-        evt = k(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), radius_view, *small,
-                np.float32(specular), np.uint32(object_id), np.float32(w), keys.color, keys.aux, cbuf)
-        return _Splat(choice, strategy, len(surfels), radius_view, evt, counters, cbuf)
+        evt = k(q, (_round_up(n, LOCAL),), (LOCAL,), *dev.bufs, np.uint32(n), view_buf, cam_buf,
+                np.uint32(len(views)), light_buf, np.float32(specular), np.uint32(object_id),
+                keys.color, keys.aux, cbuf)
+        return _Splat(choices, lead, drawn, n, strategy, len(surfels), records, evt, counters, cbuf)
 
     def collect(self):
         for s in self._splats:
@@ -234,13 +312,36 @@ class SurfelSplats:
         return False
 
     def stats(self) -> dict:
-        return {"surfels": [s.stats() for s in self._splats]}
+        """{"surfels": one dict per object}; with a Views also "views": per view {"surfels": ...}."""
+        out = {"surfels": [s.stats() for s in self._splats]}
+        if isinstance(self.camera, Views):
+            out["views"] = [{"surfels": [s.view_stats(v) for s in self._splats]} for v in range(len(self.camera))]
+        return out
+
+
+def _mesh_weights(mesh_weight, n_views: int) -> list[float]:
+    """``mesh_weight`` (one number, or one per view) as n_views floats in [0, 1]."""
+    ws = list(mesh_weight) if isinstance(mesh_weight, (list, tuple, np.ndarray)) else [mesh_weight] * n_views
+    if len(ws) != n_views:
+        raise SurfelError(f"mesh_weight: {n_views} views need one weight each, got {len(ws)}")
+    out = []
+    for w in ws:
+        try:
+            w = float(w)
+        except (TypeError, ValueError):
+            w = float("nan")
+        if not 0.0 <= w <= 1.0:
+            raise SurfelError(f"mesh_weight must be in [0, 1] (the hand-off mesh's share of the pixels), "
+                              f"got {mesh_weight!r}")
+        out.append(w)
+    return out
 
 
 def draw_surfels(keys, camera, surfels, strategy=None, transform=None, object_id: int = 1,
                  specular: float = 0.25, light=None) -> dict:
     """Splat the prefix that ``strategy`` (default: FixedSize(2)) asks for into ``keys`` (a cleared
-    or partly drawn paramlod.renderers.targets.KeyBuffer) and wait; returns stats. The caller
+    or partly drawn paramlod.renderers.targets.KeyBuffer; with a Views for ``camera``, one layer
+    per view) and wait; returns stats (with a Views also "views": one dict per view). The caller
     resolves."""
     r = SurfelSplats()
     s = r.splat(keys, camera, load_surfels(surfels), strategy or FixedSize(), transform, object_id, specular, light)
@@ -248,6 +349,8 @@ def draw_surfels(keys, camera, surfels, strategy=None, transform=None, object_id
     r.collect()
     cl_device().queue.finish()
     r.grow(None)
+    if isinstance(camera, Views):
+        return {**s.stats(), "views": [s.view_stats(v) for v in range(len(camera))]}
     return s.stats()
 
 
@@ -352,5 +455,6 @@ def render_surfels(path_or_set, camera=None, strategy=None, size=(512, 512), tra
 
 register_kind(ObjectKind("surfels", "surfels", "surfels"))
 register_renderer(RendererSpec("surfels", "surfels", SurfelSplats, "points", "keys", object,
-                               "prefixes of blue-surfel sets splatted with atom_min into the key buffers"))
+                               "prefixes of blue-surfel sets splatted with atom_min into the key buffers",
+                               multiview=True))
 register_loader("surfels", load_surfels)

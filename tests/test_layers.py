@@ -57,7 +57,7 @@ MODULES = modules()
 
 def room(mod: str) -> str:
     parts = mod.split(".")
-    if mod == "paramlod":
+    if mod in ("paramlod", "paramlod.views"):   # the package and its camera-set face
         return "public"
     if mod == "paramlod.__main__":
         return "app"

@@ -1,9 +1,19 @@
-// LOD stage: one PATCH SUBDIVISION step (thesis section 5.5.1), one work-group of 32 per patch.
+// LOD stage: one PATCH SUBDIVISION step (thesis section 5.5.1), one work-group per patch.
 // Per patch: 8 samples along u on 4 rows (v at 1/8, 3/8, 5/8, 7/8 of the range), 8 along v on 4
 // columns, and a 5x5 grid of extra samples for the frustum test and the screen bounding box.
 // Each line's screen polyline length is compared with the threshold; a line that exceeds it
 // splits the half of the patch it lies in (7 patterns, docs/lod.md). The numpy twin of this
 // kernel is paramlod/lod/reference.py: keep both in step.
+//
+// Views: one step serves n_views cameras at once (paramlod.render_views; n_views == 1 is the
+// single-view stage, bit for bit). f is evaluated once per sample and each sample projected into
+// every view. A view sees the patch when its samples' outcode AND is 0; the patch is culled only
+// when no view sees it. Otherwise every measure is the most demanding over the views that see it
+// (each line's length, the longest segments, w_u, w_v: maxima; the mixed lines: OR; the screen
+// box: the union of those views' boxes), so a patch splits when it is too large in any of them:
+// no view that sees a patch of the shared render list would split it. (The shared tree need not
+// contain each view's own: where one view cuts a patch 1:3 and another needs the other half cut
+// too, the patch is cut 1:2, docs/lod.md.)
 //
 // Boundary lines: the measured lines lie inside the patch (1/8 .. 7/8), so a patch whose screen
 // speed peaks on its own edge would sample that edge too sparsely, and so would its neighbour
@@ -24,7 +34,8 @@
 //
 // Counters: one record of LOD_COUNTERS uints per step (LOD_CHILDREN, LOD_SPLIT, ...); record 0
 // holds the initial patch count and, at LOD_RENDER_TOTAL, the render list's length. These, the
-// patch structs and LOD_LOCAL come from the prelude (paramlod.core.layouts).
+// patch structs and LOD_LOCAL come from the prelude (paramlod.core.layouts); LOD_GROUP, LOD_SLOTS
+// (the work-group's layout, lod_step) and LOD_MAX_VIEWS from the host (paramlod/lod/stage.py).
 
 typedef struct {
     float2 s;      // screen position in pixels
@@ -32,13 +43,19 @@ typedef struct {
     uint code;     // frustum outcode
 } Sample;
 
-inline Sample lod_sample(uint func, __global const float* P, __global const float* I,
-                         __global const float* cam, float u, float v) {
-    Sample r;
+// A sample's world position (after the instance transform), once per patch for every view;
+// w is 1 for a NaN/inf position (bad in every view).
+inline float4 lod_world(uint func, __global const float* P, __global const float* I, float u, float v) {
     float3 p = pl_position(func, u, v, P);
-    if (is_bad3(p)) { r.s = (float2)(0.0f, 0.0f); r.state = 2; r.code = 63u; return r; }
-    float3 w = xform_point(I + INST_MODEL, p);
-    float3 e = xform_point(cam + CAM_VIEW, w);
+    if (is_bad3(p)) return (float4)(0.0f, 0.0f, 0.0f, 1.0f);
+    return (float4)(xform_point(I + INST_MODEL, p), 0.0f);
+}
+
+// The sample at world position w seen by the camera record at cam.
+inline Sample lod_project(__global const float* cam, float4 w) {
+    Sample r;
+    if (w.w != 0.0f) { r.s = (float2)(0.0f, 0.0f); r.state = 2; r.code = 63u; return r; }
+    float3 e = xform_point(cam + CAM_VIEW, w.xyz);
     float4 c = project(cam, e);
     // a finite position can still overflow float32 on its way to clip space (a function returning
     // ~1e38): such a sample is bad like a NaN one, never a reason to split forever
@@ -110,18 +127,20 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
 }
 
 // The decision for one measured patch: cull, render (or force out on the last step), or split
-// into 2, 3 or 4 children by the 7 patterns. eu, ev: the four u- and v-polyline lengths; mixed: the
-// 8 lines (u then v) that have both bad and good samples, split like a long line; mu_seg,
-// mv_seg: their longest segments; w_u, w_v: 7 x those raised to the boundary lines' need; box: screen bounding box; code: AND of the samples' outcodes.
+// into 2, 3 or 4 children by the 7 patterns. seen: some view sees the patch; the measures are the
+// maxima over the views that see it: eu, ev: the four u- and v-polyline lengths; mixed: the 8
+// lines (u then v) that have both bad and good samples (in some view), split like a long line;
+// mu_seg, mv_seg: their longest segments; w_u, w_v: 7 x those raised to the boundary lines' need;
+// box: the union of those views' screen bounding boxes.
 inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const bool* mixed,
-                       float mu_seg, float mv_seg, float w_u, float w_v, float4 box, uint code, __global EvalPatch* out, uint out_cap,
+                       float mu_seg, float mv_seg, float w_u, float w_v, float4 box, bool seen, __global EvalPatch* out, uint out_cap,
                        __global RenderPatch* render, uint render_cap,
                        __global uint* counters, __global uint* render_count,
                        float t_u, float t_v, uint step, uint force)
 {
     uint inst = patch.inst;
     float u0 = patch.range.x, u1 = patch.range.y, v0 = patch.range.z, v1 = patch.range.w;
-    if (code != 0u) { atomic_inc(&counters[LOD_CULLED]); return; }  // every sample outside one clip plane
+    if (!seen) { atomic_inc(&counters[LOD_CULLED]); return; }  // in every view all samples outside one clip plane
 
     bool a = eu[0] > t_u || eu[1] > t_u || mixed[0] || mixed[1];   // u-lines in the lower v half
     bool b = eu[2] > t_u || eu[3] > t_u || mixed[2] || mixed[3];   // u-lines in the upper v half
@@ -202,39 +221,77 @@ inline float2 lod_uv(uint s, float u0, float v0, float du, float dv) {
     return (float2)(u0 + du * ((float)(e % 5u) * 0.25f), v0 + dv * ((float)(e / 5u) * 0.25f));
 }
 
-inline Sample lod_at(__local const float2* pos, __local const int* state, uint s) {
+inline Sample lod_at(__local const float2* pos, __local const uchar* state, uint s) {
     Sample q;
     q.s = pos[s]; q.state = state[s]; q.code = 0u;
     return q;
 }
 
-// One LOD step: a work-group of LOD_LOCAL work-items measures one patch at a time, each work-item
-// evaluating some of its 89 samples (a patch's samples are the expensive part, and a step with a
-// few hundred patches would leave most of a GPU idle with one work-item per patch). The number
-// of input patches is read on the device (the previous step's child count), so the host enqueues
-// all steps without waiting and reads the counters once per frame; work-groups stride over the
-// patches. A step whose input overflowed its buffer only sees the first `cap` patches: the host
-// detects that afterwards and redoes the stage. LOD_LOCAL: the prelude's (the host launches with it).
-__kernel __attribute__((reqd_work_group_size(LOD_LOCAL, 1, 1)))
+// A screen coordinate as an int that orders like the float (for local atomic_min / max; screen
+// coordinates are never NaN).
+inline int box_key(float f) {
+    int i = as_int(f);
+    return i >= 0 ? i : i ^ 0x7fffffff;
+}
+
+inline float box_float(int k) {
+    return as_float(k >= 0 ? k : k ^ 0x7fffffff);
+}
+
+// The measures over the views that see the patch (local, reduced with atomics): 0..7 each line's
+// length, 8, 9 the longest u- and v-segment, 10, 11 w_u, w_v (float bits: maxima of floats >= 0 are
+// maxima of their bits, and one view's own value), 12 the mixed lines (bit k: line k), 13..16 the
+// screen box (box_key: min x, min y, max x, max y), 17 some view sees the patch.
+#define COMB 18
+
+// One LOD step: a work-group of LOD_GROUP work-items measures one patch at a time (a patch's
+// samples are the expensive part, and a step with a few hundred patches would leave most of a GPU
+// idle with one work-item per patch). The number of input patches is read on the device (the
+// previous step's child count), so the host enqueues all steps without waiting and reads the
+// counters once per frame; work-groups stride over the patches. A step whose input overflowed its
+// buffer only sees the first `cap` patches: the host detects that afterwards and redoes the stage.
+//
+// Views: cam holds n_views camera records (CAM_FLOATS each, at most LOD_MAX_VIEWS). Per patch the
+// work-items evaluate f at the 89 samples, once each, and keep the world positions; then the views
+// are taken LOD_SLOTS at a time (a chunk): work-item l projects the samples l / LOD_SLOTS,
+// + LOD_GROUP / LOD_SLOTS, ... into view slot l % LOD_SLOTS and keeps the screen positions; the
+// outcode AND and screen box of each slot are reduced over its work-items; then one work-item per
+// line and slot (8 lines, the 5x5 grid's 4 edges) measures it as the single-view step does, for the
+// slots whose view sees the patch, and adds it to the measures over the views (atomic max). Once
+// every chunk is done, w_u, w_v of each view that sees the patch go in, and work-item 0 decides.
+// The host picks LOD_GROUP and LOD_SLOTS for the number of views (paramlod/lod/stage.py: more
+// views, more work-items, 32 a slot, up to (256, 8): a step's few patches make its time one
+// patch's, so the work-items a view has stay those one view has); with one view, (32, 1), this is
+// the single-view step bit for bit (the same operations in the same order, a maximum over one
+// view). Local memory: 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views.
+__kernel __attribute__((reqd_work_group_size(LOD_GROUP, 1, 1)))
 void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
               __global RenderPatch* render, uint render_cap,
               __global uint* counters,   // per step: LOD_COUNTERS uints; see paramlod/lod/stage.py
               __global const float* inst_f, __global const uint* inst_u,
-              __global const float* params, __global const float* cam,
+              __global const float* params, __global const float* cam, uint n_views,
               float t_u, float t_v, uint step, uint force)
 {
-    __local float2 pos[LOD_SAMPLES];
-    __local int state[LOD_SAMPLES];
-    __local float4 box_part[LOD_LOCAL];
-    __local uint code_part[LOD_LOCAL];
-    __local float line[16];   // 0..3 u-line lengths, 4..7 v-line lengths, 8..15 their longest segments
-    __local int mixed_line[8];   // the line has both bad and good samples
-    __local float edge[12];   // 0..7 each line's measure extrapolated to its two ends, 8..11 edge chords
+    __local float4 wpos[LOD_SAMPLES];                      // world position; w: 1 for a bad sample
+    __local float2 pos[LOD_SLOTS * LOD_SAMPLES];           // screen positions of a chunk's views
+    __local uchar state[LOD_SLOTS * LOD_SAMPLES];          // Sample.state
+    __local float4 box_part[LOD_GROUP];
+    __local uint code_part[LOD_GROUP];
+    // per view: the u- and v-lines' longest segment and boundary need (float bits), whether it sees
+    // the patch
+    __local uint vseg[LOD_MAX_VIEWS * 2];
+    __local uint vneed[LOD_MAX_VIEWS * 2];
+    __local uint vseen[LOD_MAX_VIEWS];
+    // two sets, one per patch parity: work-item 0 still reads one when the others clear the next
+    __local uint comb_sets[2 * COMB];
     uint n_in = min(counters[(step - 1) * LOD_COUNTERS + LOD_CHILDREN], cap);
     __global uint* c = counters + step * LOD_COUNTERS;
     __global uint* render_count = counters + LOD_RENDER_TOTAL;
     uint l = get_local_id(0);
+    uint slot = l % LOD_SLOTS;
+    __local uint* comb = comb_sets;
     for (uint i = get_group_id(0); i < n_in; i += get_num_groups(0)) {
+        comb = comb_sets + COMB - (comb - comb_sets);   // the other set
         EvalPatch patch = in[i];
         uint inst = patch.inst;
         __global const float* I = inst_f + inst * INST_F;
@@ -242,73 +299,110 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
         __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
         float u0 = patch.range.x, v0 = patch.range.z;
         float du = patch.range.y - u0, dv = patch.range.w - v0;
-        float4 box = (float4)(INFINITY, INFINITY, -INFINITY, -INFINITY);
-        uint code = 63u;
-        for (uint s = l; s < LOD_SAMPLES; s += LOD_LOCAL) {
+        for (uint s = l; s < LOD_SAMPLES; s += LOD_GROUP) {
             float2 uv = lod_uv(s, u0, v0, du, dv);
-            Sample q = lod_sample(func, P, I, cam, uv.x, uv.y);
-            pos[s] = q.s; state[s] = q.state;
-            code &= q.code; grow_box(&box, q);
+            wpos[s] = lod_world(func, P, I, uv.x, uv.y);
         }
-        box_part[l] = box; code_part[l] = code;
+        if (l < COMB) comb[l] = l == 13u || l == 14u ? (uint)box_key(INFINITY)
+                              : l == 15u || l == 16u ? (uint)box_key(-INFINITY) : 0u;
+        for (uint v = l; v < n_views; v += LOD_GROUP) vseg[2u * v] = vseg[2u * v + 1u] = vneed[2u * v] = vneed[2u * v + 1u] = 0u;
         barrier(CLK_LOCAL_MEM_FENCE);
-        if (l < 8u) {   // one work-item per polyline, its segments summed in order (as the numpy twin)
-            float sum = 0.0f, longest = 0.0f;
-            for (uint k = 1; k < 8u; ++k) {
-                float len = seg_len(lod_at(pos, state, l * 8u + k - 1u), lod_at(pos, state, l * 8u + k));
-                sum += len; longest = fmax(longest, len);
+        for (uint c0 = 0; c0 < n_views; c0 += LOD_SLOTS) {
+            uint nc = min((uint)LOD_SLOTS, n_views - c0);
+            float4 box = (float4)(INFINITY, INFINITY, -INFINITY, -INFINITY);
+            uint code = 63u;
+            if (slot < nc) {
+                __global const float* cv = cam + (c0 + slot) * CAM_FLOATS;
+                for (uint s = l / LOD_SLOTS; s < LOD_SAMPLES; s += LOD_GROUP / LOD_SLOTS) {
+                    Sample q = lod_project(cv, wpos[s]);
+                    pos[slot * LOD_SAMPLES + s] = q.s; state[slot * LOD_SAMPLES + s] = (uchar)q.state;
+                    code &= q.code; grow_box(&box, q);
+                }
             }
-            line[l] = sum; line[8u + l] = longest;
-            uint n_bad = 0;
-            for (uint k = 0; k < 8u; ++k) n_bad += state[l * 8u + k] == 2 ? 1u : 0u;
-            // ... while its good part is longer than a pixel: past that, the undefined rest of the
-            // line beside it is sub-pixel too (a finite edge, as a dome's rim, stops splitting there)
-            mixed_line[l] = n_bad > 0u && n_bad < 8u && sum > MIXED_MIN_PX;
-            // the line's speed at its two ends (on the patch's edges across it), from its first and
-            // last two segments: 7 segments span the line, so 7 x a segment is a whole-line measure
-            float s0 = seg_len(lod_at(pos, state, l * 8u), lod_at(pos, state, l * 8u + 1u));
-            float s1 = seg_len(lod_at(pos, state, l * 8u + 1u), lod_at(pos, state, l * 8u + 2u));
-            float s5 = seg_len(lod_at(pos, state, l * 8u + 5u), lod_at(pos, state, l * 8u + 6u));
-            float s6 = seg_len(lod_at(pos, state, l * 8u + 6u), lod_at(pos, state, l * 8u + 7u));
-            edge[l] = 7.0f * fmax(edge_extrapolate(s0, s1), edge_extrapolate(s6, s5));
-        } else if (l < 12u) {
-            // the 5x5 grid's four edges (v = v0, v = v1 along u; u = u0, u = u1 along v):
-            // 4 x the longest of each edge's 4 chords, a whole-line measure of the edge itself
-            uint e = l - 8u;
-            uint first = e == 0u ? 0u : e == 1u ? 20u : e == 2u ? 0u : 4u;
-            uint stride = e < 2u ? 1u : 5u;
-            float longest = 0.0f;
-            for (uint k = 0; k < 4u; ++k) {
-                uint at = 64u + first + k * stride;
-                longest = fmax(longest, seg_len(lod_at(pos, state, at), lod_at(pos, state, at + stride)));
-            }
-            edge[l] = 4.0f * longest;
-        }
-        for (uint h = LOD_LOCAL / 2; h > 0; h >>= 1) {   // box and outcode over the work-group
-            if (l < h) {
-                float4 o = box_part[l + h], m = box_part[l];
-                box_part[l] = (float4)(fmin(m.x, o.x), fmin(m.y, o.y), fmax(m.z, o.z), fmax(m.w, o.w));
-                code_part[l] &= code_part[l + h];
-            }
+            box_part[l] = box; code_part[l] = code;
             barrier(CLK_LOCAL_MEM_FENCE);
+            for (uint h = LOD_GROUP / 2; h >= LOD_SLOTS; h >>= 1) {   // box and outcode over each slot's work-items
+                if (l < h) {
+                    float4 o = box_part[l + h], m = box_part[l];
+                    box_part[l] = (float4)(fmin(m.x, o.x), fmin(m.y, o.y), fmax(m.z, o.z), fmax(m.w, o.w));
+                    code_part[l] &= code_part[l + h];
+                }
+                barrier(CLK_LOCAL_MEM_FENCE);
+            }
+            // box_part, code_part [0, nc): the chunk's views'. One work-item per line (or edge) and
+            // view seeing the patch; line-major, so the work-items of a round mostly run one kind.
+            for (uint t = l; t < 12u * nc; t += LOD_GROUP) {
+                uint k = t / nc, q = t - k * nc, v = c0 + q;
+                if (code_part[q] != 0u) continue;
+                __local const float2* sp = pos + q * LOD_SAMPLES;
+                __local const uchar* st = state + q * LOD_SAMPLES;
+                if (k < 8u) {   // line k: 0..3 along u, 4..7 along v; segments summed in order (as the numpy twin)
+                    float seg[7];
+                    uint n_bad = st[k * 8u] == 2 ? 1u : 0u;
+                    for (uint j = 1; j < 8u; ++j) {
+                        seg[j - 1u] = seg_len(lod_at(sp, st, k * 8u + j - 1u), lod_at(sp, st, k * 8u + j));
+                        n_bad += st[k * 8u + j] == 2 ? 1u : 0u;
+                    }
+                    float sum = 0.0f, longest = 0.0f;
+                    for (uint j = 0; j < 7u; ++j) { sum += seg[j]; longest = fmax(longest, seg[j]); }
+                    atomic_max(&comb[k], as_uint(sum));
+                    // ... while its good part is longer than a pixel: past that, the undefined rest of the
+                    // line beside it is sub-pixel too (a finite edge, as a dome's rim, stops splitting there)
+                    if (n_bad > 0u && n_bad < 8u && sum > MIXED_MIN_PX) atomic_or(&comb[12], 1u << k);
+                    // the line's speed at its two ends (on the patch's edges across it), from its first and
+                    // last two segments: 7 segments span the line, so 7 x a segment is a whole-line measure
+                    float need = 7.0f * fmax(edge_extrapolate(seg[0], seg[1]), edge_extrapolate(seg[6], seg[5]));
+                    atomic_max(&vseg[2u * v + (k >> 2)], as_uint(longest));
+                    atomic_max(&vneed[2u * v + (k >> 2)], as_uint(need));
+                } else {
+                    // the 5x5 grid's four edges (v = v0, v = v1 along u; u = u0, u = u1 along v):
+                    // 4 x the longest of each edge's 4 chords, a whole-line measure of the edge itself
+                    uint e = k - 8u;
+                    uint first = 64u + (e == 0u ? 0u : e == 1u ? 20u : e == 2u ? 0u : 4u);
+                    uint stride = e < 2u ? 1u : 5u;
+                    float longest = 0.0f;
+                    for (uint j = 0; j < 4u; ++j) {
+                        uint at = first + j * stride;
+                        longest = fmax(longest, seg_len(lod_at(sp, st, at), lod_at(sp, st, at + stride)));
+                    }
+                    atomic_max(&vneed[2u * v + (e >> 1)], as_uint(4.0f * longest));
+                }
+            }
+            if (l < nc) {
+                vseen[c0 + l] = code_part[l] == 0u;
+                if (code_part[l] == 0u) {   // the union of the boxes of the views that see the patch
+                    float4 b = box_part[l];
+                    atomic_min((__local int*)&comb[13], box_key(b.x)); atomic_min((__local int*)&comb[14], box_key(b.y));
+                    atomic_max((__local int*)&comb[15], box_key(b.z)); atomic_max((__local int*)&comb[16], box_key(b.w));
+                    atomic_or(&comb[17], 1u);
+                }
+            }
+            barrier(CLK_LOCAL_MEM_FENCE);   // the next chunk overwrites pos, state and the parts
         }
-        if (l == 0u) {
-            float eu[4] = {line[0], line[1], line[2], line[3]};
-            float ev[4] = {line[4], line[5], line[6], line[7]};
-            float mu_seg = fmax(fmax(line[8], line[9]), fmax(line[10], line[11]));
-            float mv_seg = fmax(fmax(line[12], line[13]), fmax(line[14], line[15]));
+        for (uint v = l; v < n_views; v += LOD_GROUP) {
+            if (!vseen[v]) continue;
             // what the boundary lines need along u: the u-lines' speeds at u0 and u1 (across those
             // edges) and the chords of the edges v = v0, v1 (along them); along v the same with the
             // v-lines and the edges u = u0, u1. (Extrapolating the u-lines' measure to v0 and v1
             // as well added samples, 1-6 %, and closed no hole the chords left.)
-            float nu_b = fmax(fmax(fmax(edge[0], edge[1]), fmax(edge[2], edge[3])), fmax(edge[8], edge[9]));
-            float nv_b = fmax(fmax(fmax(edge[4], edge[5]), fmax(edge[6], edge[7])), fmax(edge[10], edge[11]));
-            float w_u = raise_measure(7.0f * mu_seg, nu_b), w_v = raise_measure(7.0f * mv_seg, nv_b);
+            for (uint d = 0; d < 2u; ++d) {
+                float longest = as_float(vseg[2u * v + d]);
+                atomic_max(&comb[8u + d], as_uint(longest));
+                atomic_max(&comb[10u + d], as_uint(raise_measure(7.0f * longest, as_float(vneed[2u * v + d]))));
+            }
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+        if (l == 0u) {
+            float eu[4], ev[4];
             bool mixed[8];
-            for (uint k = 0; k < 8u; ++k) mixed[k] = mixed_line[k] != 0;
-            lod_decide(patch, eu, ev, mixed, mu_seg, mv_seg, w_u, w_v, box_part[0], code_part[0], out, cap, render,
+            for (uint k = 0; k < 4u; ++k) { eu[k] = as_float(comb[k]); ev[k] = as_float(comb[4u + k]); }
+            for (uint k = 0; k < 8u; ++k) mixed[k] = (comb[12] >> k) & 1u;
+            float4 box = (float4)(box_float((int)comb[13]), box_float((int)comb[14]),
+                                  box_float((int)comb[15]), box_float((int)comb[16]));
+            lod_decide(patch, eu, ev, mixed, as_float(comb[8]), as_float(comb[9]),
+                       as_float(comb[10]), as_float(comb[11]), box, comb[17] != 0u, out, cap, render,
                        render_cap, c, render_count, t_u, t_v, step, force);
         }
-        barrier(CLK_LOCAL_MEM_FENCE);   // the next patch overwrites the local arrays
+        // no barrier here: the next patch clears the other set of comb
     }
 }

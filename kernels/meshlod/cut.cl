@@ -1,6 +1,6 @@
 // Mesh LOD cut: one work-item per (instance, cluster) of a batch (the instances of one mesh over
 // that mesh's clusters: global id 0 = cluster, 1 = instance). A cluster is drawn for an instance
-// iff its group's projected error is <= the threshold and its parent group's is > it; drawn
+// iff its group's projected error does not exceed the threshold and its parent group's does; drawn
 // clusters then meet the frustum test and, for SIMILAR instances, the backface cone. The rule and
 // the cut camera record (CC_* offsets, passed as -D defines) are described in
 // paramlod/meshlod/cut_reference.py, the numpy twin of this file: the float32 operations here are
@@ -9,32 +9,63 @@
 // kernels/common/common.cl (64-bit atomics).
 //
 // Output: (instance, cluster) uint2 pairs appended to `selection` (written only below
-// `capacity`), and 8 ulong counters: [0] selected (may exceed capacity), [1] their triangles,
-// [2] culled by the frustum, [3] culled by the backface cone, [4] cluster tests made.
+// `capacity`; with several views their masks to `masks`), and 8 ulong counters: [0] selected
+// (may exceed capacity), [1] their triangles, [2] culled by the frustum, [3] culled by the
+// backface cone, [4] cluster tests made (then, with several views, two per view).
 // Each work-group sums its counts in local memory and reserves its range of the selection with
 // one global atomic, so the counters see one atomic per group and counter, not per cluster.
 // An instance whose hand-off weight (`weights`, paramlod/scene/handoff.py) is 0 selects nothing and
 // makes no tests: its surfels draw every pixel (a group holds one instance).
+//
+// Views (`cams`: n_views cut camera records, kernels/meshlod/cut_common.cl; `cam`: view 0's, by
+// value): the projected error of a group is its largest over the views whose frustum its LOD
+// sphere meets (the smallest over all views when none does), so a child's parent test and its
+// parent group's own test still read the same values and the cut stays a cut, refined as far as
+// the view that needs most asks; a selected cluster is dropped only when every view culls it
+// (frustum or backface cone), and otherwise drawn into the views that do not (its view mask).
+// n_views == 1 is the one-view rule.
 #pragma OPENCL FP_CONTRACT OFF
 #include "common/rows.cl"
 #include "meshlod/cut_common.cl"
 
-// the cut camera record, passed by value with the launch (no buffer write per frame)
-typedef struct { float v[CC_FLOATS]; } CutCamera;
-
-// The projected error in pixels of error e around object-space sphere S (0 for e == 0).
-inline float cut_proj(float e, float4 S, __global const float* m, float s, const float* cc) {
+// The projected error in pixels of error e around the sphere of world centre w and object-space
+// radius r (0 for e == 0) in the view of cut camera record cc, for an instance of largest scale s.
+inline float cut_proj_at(float e, float3 w, float r, float s, const float* cc) {
     if (e == 0.0f) return 0.0f;
-    float3 w = rows_point(m, S.xyz);
     float depth = ((cc[CC_DEPTH] * w.x + cc[CC_DEPTH + 1] * w.y) + cc[CC_DEPTH + 2] * w.z) + cc[CC_DEPTH + 3];
-    float dn = fmax(depth - S.w * s, cc[CC_NEAR]);
+    float dn = fmax(depth - r * s, cc[CC_NEAR]);
     float wd = cc[CC_WA] * dn + cc[CC_WB];
     return ((e * s) * cc[CC_K]) / wd;
+}
+
+// The projected error of error e around object-space sphere S.
+inline float cut_proj(float e, float4 S, __global const float* m, float s, const float* cc) {
+    return e == 0.0f ? 0.0f : cut_proj_at(e, rows_point(m, S.xyz), S.w, s, cc);
 }
 
 // True when the bounding sphere (world centre, radius r * s) lies wholly outside one clip plane.
 inline bool cut_outside(float4 S, __global const float* m, float s, const float* cc) {
     return planes_outside(rows_point(m, S.xyz), S.w * s, cc);
+}
+
+// True when the projected error of (e, S) over the views exceeds T: in a view whose frustum S
+// meets, or, when S is outside every view, in all of them (cut_reference.exceeds). `cam`: view 0.
+inline bool cut_exceeds(float e, float4 S, __global const float* m, float s, const float* cam,
+                        __global const float* cams, uint n_views, float T) {
+    if (CUT_VIEWS(n_views) == 1u) return cut_proj(e, S, m, s, cam) > T;
+    if (e == 0.0f) return false;   // 0 in every view, and T >= 0
+    float3 w = rows_point(m, S.xyz);   // the same in every view
+    bool seen = false, all = true;
+    for (uint v = 0; v < CUT_VIEWS(n_views); ++v) {
+        CutCamera cv = cut_view(cams, v);
+        bool above = cut_proj_at(e, w, S.w, s, cv.v) > T;
+        if (!planes_outside(w, S.w * s, cv.v)) {
+            if (above) return true;
+            seen = true;
+        }
+        all = all && above;
+    }
+    return !seen && all;
 }
 
 // meshoptimizer's cone rule in object space: the eye is brought there by M^-1 = (N^T, -N^T t).
@@ -52,13 +83,23 @@ inline bool cut_backfacing(float4 apex, float4 cone, __global const float* inst,
     return cone.w < 1.0f && len > 0.0f && dt >= cone.w * len;
 }
 
+// How view cc treats a cluster the LOD chose: 0 keeps it, 1 culls it by the frustum, 2 by the
+// backface cone (the one-view tests, in their order).
+inline uint cut_cull(__global const Cluster* cl, __global const float* I, float s, bool similar, uint mode,
+                     const float* cc) {
+    if ((mode & 1u) && cut_outside(cl->sphere, I + INST_MODEL, s, cc)) return 1u;
+    if ((mode & 2u) && similar && cut_backfacing(cl->cone_apex, cl->cone, I, cc)) return 2u;
+    return 0u;
+}
+
 __kernel __attribute__((reqd_work_group_size(CUT_LOCAL, 1, 1)))
 void cluster_cut(__global const Cluster* clusters, uint first_cluster, uint n_clusters, uint first_instance,
                  __global const float* inst_f, __global const uint* inst_u, __global const float* scales,
-                 __global const float* weights, const CutCamera cam, uint mode,
-                 __global uint2* selection, uint capacity, __global ulong* counters)
+                 __global const float* weights, const CutCamera cam, __global const float* cams, uint n_views,
+                 uint mode, __global uint2* selection, __global ulong* masks, uint capacity, __global ulong* counters)
 {
     __local uint l_n[4];   // selected, their triangles, frustum-culled, backface-culled (cut_group_append)
+    __local uint l_v[2 * CUT_MAX_VIEWS];   // per view: selected, their triangles (n_views > 1)
     __local ulong l_base;
     uint inst = first_instance + (uint)get_global_id(1);
     // no early return: PoCL's work-group loops need every work-item to reach the barriers
@@ -66,32 +107,48 @@ void cluster_cut(__global const Cluster* clusters, uint first_cluster, uint n_cl
     const float* cc = cam.v;
     uint lid = get_local_id(0);
     if (lid == 0) { l_n[0] = 0u; l_n[1] = 0u; l_n[2] = 0u; l_n[3] = 0u; }
+    if (CUT_VIEWS(n_views) > 1u) cut_views_zero(l_v, n_views, CUT_LOCAL);
     barrier(CLK_LOCAL_MEM_FENCE);
 
     uint c = get_global_id(0);
     uint slot = 0xFFFFFFFFu;
+    ulong mask = 0ul;
     if (c < n_clusters && live) {
         __global const Cluster* cl = clusters + first_cluster + c;
         __global const float* I = inst_f + (size_t)inst * INST_F;
         __global const float* m = I + INST_MODEL;
         float s = scales[inst];
         float T = cc[CC_T];
-        bool draw = cut_proj(cl->error, cl->lod_sphere, m, s, cc) <= T;
+        bool draw = !cut_exceeds(cl->error, cl->lod_sphere, m, s, cc, cams, n_views, T);
         if (draw && !isinf(cl->parent_error))
-            draw = cut_proj(cl->parent_error, cl->parent_sphere, m, s, cc) > T;
+            draw = cut_exceeds(cl->parent_error, cl->parent_sphere, m, s, cc, cams, n_views, T);
         if (draw) {
-            if ((mode & 1u) && cut_outside(cl->sphere, m, s, cc)) {
-                atomic_inc(&l_n[2]);
-            } else if ((mode & 2u) && (inst_u[(size_t)inst * INST_U + INST_FLAGS] & CUT_SIMILAR)
-                       && cut_backfacing(cl->cone_apex, cl->cone, I, cc)) {
-                atomic_inc(&l_n[3]);
+            bool similar = (inst_u[(size_t)inst * INST_U + INST_FLAGS] & CUT_SIMILAR) != 0u;
+            bool all_outside;
+            if (CUT_VIEWS(n_views) == 1u) {
+                uint why = cut_cull(cl, I, s, similar, mode, cc);
+                mask = why ? 0ul : 1ul;
+                all_outside = why == 1u;
             } else {
+                all_outside = true;
+                for (uint v = 0; v < CUT_VIEWS(n_views); ++v) {
+                    CutCamera cv = cut_view(cams, v);
+                    uint why = cut_cull(cl, I, s, similar, mode, cv.v);
+                    if (!why) mask |= 1ul << v;
+                    all_outside = all_outside && why == 1u;
+                }
+            }
+            if (mask) {
                 slot = atomic_inc(&l_n[0]);
                 atomic_add(&l_n[1], cl->count);
+                if (CUT_VIEWS(n_views) > 1u) cut_views_count(l_v, mask, cl->count);
+            } else {
+                atomic_inc(&l_n[all_outside ? 2 : 3]);
             }
         }
     }
     uint start = (uint)get_group_id(0) * CUT_LOCAL;
     uint tests = start < n_clusters && live ? min((uint)CUT_LOCAL, n_clusters - start) : 0u;
-    cut_group_append(l_n, &l_base, tests, slot, (uint2)(inst, first_cluster + c), selection, capacity, counters);
+    cut_group_append(l_n, &l_base, tests, slot, (uint2)(inst, first_cluster + c), selection, capacity, counters,
+                     l_v, n_views, mask, masks, CUT_LOCAL);
 }

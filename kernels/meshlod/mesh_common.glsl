@@ -13,3 +13,9 @@ uniform mat4 u_view;        // world -> view
 uniform mat4 u_proj;        // view -> clip
 
 #include "common/rows.glsl"
+
+#ifdef PL_VIEWS
+// The views of a multi-view draw (MeshDraw.draw_views): world -> view and view -> clip of each.
+struct PlView { mat4 view; mat4 proj; };
+layout(std140, binding = 0) uniform PlViews { PlView pl_views[PL_MAX_VIEWS]; };
+#endif

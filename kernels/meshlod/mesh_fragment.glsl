@@ -6,6 +6,8 @@
 // PL_COLOR_BY (MeshDraw.draw's color_by): 0 the material's colour; 1 a colour per cluster, 2 a
 // colour per LOD level (common/debug_color.cl, which the host puts before this file for 1 and 2),
 // shaded like a material of that colour.
+// Multi-view draws (PL_VIEWS) read the matrices of the fragment's view from pl_views
+// (mesh_common.glsl), where one view reads u_view.
 // Hand-off (paramlod/scene/handoff.py): an object of weight w < 1 (pl_object_weight, indexed by
 // object id: a hand-off mesh is one instance of its own object) keeps only the fragments whose
 // dither is below w, the surfels drawing the others. pl_dither is kernels/common/hash.cl's, on the
@@ -17,6 +19,12 @@ flat in vec4 ms_material;
 flat in uint ms_object;
 flat in uint ms_cluster;
 flat in uint ms_level;
+#ifdef PL_VIEWS
+flat in uint ms_view_index;   // the view (layer) the geometry stage drew the triangle into
+#define PL_VIEW_MATRIX pl_views[ms_view_index].view
+#else
+#define PL_VIEW_MATRIX u_view
+#endif
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out float out_depth;
@@ -50,6 +58,6 @@ void main() {
     vec3 rgb = pl_shade_rgb(n, ev, base, ms_material.w, u_light.xyz, u_light.w);
     out_color = vec4(clamp(rgb, 0.0, 1.0), 1.0);
     out_depth = -ms_view.z;
-    out_normal = vec4(transpose(mat3(u_view)) * n, 0.0);
+    out_normal = vec4(transpose(mat3(PL_VIEW_MATRIX)) * n, 0.0);
     out_object = ms_object;
 }

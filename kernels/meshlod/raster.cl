@@ -20,6 +20,12 @@
 // Hand-off (paramlod/scene/handoff.py): an instance of weight w < 1 (`weights`, one float per
 // instance) draws only the pixels whose dither (keys.cl pl_dither) is below w; its surfels draw the
 // others.
+// Views (a multi-view frame): `cams` holds n_views camera records one after another and the key
+// buffers n_views layers (view v's pixel (x, y) is key v W H + y W + x); each selected pair is
+// drawn into the views of its mask (`masks`, from the cut: the views whose frustum and backface
+// tests keep the cluster), work-item by work-item: per view its own clipping and setup of the
+// triangle, into that view's layer. A large-list entry carries its view in the high half of its
+// fan index. With one view `masks` is not read and everything is the one-view raster.
 #pragma OPENCL FP_CONTRACT OFF
 #include "common/rows.cl"
 #include "common/keys.cl"
@@ -37,7 +43,7 @@
 #define RS_POLY 8           // a triangle clipped by 5 planes has at most 8 vertices
 
 // counters (ulong), paramlod.meshlod.raster.COUNTERS
-#define RS_TRIANGLES 0      // triangles of the selected clusters
+#define RS_TRIANGLES 0      // triangles of the selected clusters (times their views)
 #define RS_NEAR_CLIPPED 1   // of them crossing the near plane
 #define RS_CULLED 2         // of them drawing nothing: behind near, beyond far, not finite,
                             // degenerate, off screen or between pixel centres
@@ -194,9 +200,10 @@ inline long rs_edge(const RsTri* t, int i, int x, int y) {
     return t->dx[i] * (py - t->ay[i]) - t->dy[i] * (px - t->ax[i]);
 }
 
-// One covered pixel centre with edge functions E0..E2: interpolate, shade, write both keys.
-// Returns 1 when the colour atomic was issued; *covered counts pixels with depth in [near, far].
-inline uint rs_fragment(const RsTri* t, long E0, long E1, long E2, int x, int y,
+// One covered pixel centre with edge functions E0..E2: interpolate, shade, write both keys of
+// the layer whose first key is `layer`. Returns 1 when the colour atomic was issued; *covered
+// counts pixels with depth in [near, far].
+inline uint rs_fragment(const RsTri* t, long E0, long E1, long E2, int x, int y, uint layer,
                         __global const float* cam, __global const float* light, float4 mat, uint object_id,
                         float weight, __global ulong* color_buf, __global ulong* aux_buf, ulong* covered) {
     if (weight < 1.0f && !(pl_dither((uint)x, (uint)y) < weight)) return 0u;   // the surfels' pixel
@@ -206,7 +213,7 @@ inline uint rs_fragment(const RsTri* t, long E0, long E1, long E2, int x, int y,
     if (!(depth >= cam[CAM_NEAR] && depth <= cam[CAM_FAR])) return 0u;
     *covered += 1;
     uint iw = (uint)cam[CAM_W];
-    uint pix = (uint)y * iw + (uint)x;
+    uint pix = layer + (uint)y * iw + (uint)x;
     // early depth: a nearer key is there already (the aux key's depth is never larger than the
     // colour key's), so this fragment's keys cannot win whatever its shade
     if ((uint)(color_buf[pix] >> 32) < as_uint(depth)) return 0u;
@@ -236,50 +243,56 @@ void raster_clusters(__global const float4* vertices, __global const float4* nor
                      __global const uint* triangles, __global const Cluster* clusters,
                      __global const float* inst_f, __global const uint* inst_u,
                      __global const float4* materials, __global const float* weights,
-                     __global const uint2* selection, uint capacity, __global const ulong* cut_counters,
-                     __global const float* cam, __global const float* light, uint color_by, uint large_pixels,
+                     __global const uint2* selection, __global const ulong* masks, uint capacity,
+                     __global const ulong* cut_counters, __global const float* cams, uint n_views,
+                     __global const float* light, uint color_by, uint large_pixels,
                      __global ulong* color_buf, __global ulong* aux_buf,
                      __global uint4* large, uint large_capacity, __global ulong* counters)
 {
     uint lid = get_local_id(0);
     ulong n_sel = min(cut_counters[0], (ulong)capacity);
     ulong tris = 0, clipped = 0, culled = 0, covered = 0, issued = 0;
+    uint layer_keys = (uint)cams[CAM_W] * (uint)cams[CAM_H];
     for (ulong s = get_group_id(0); s < n_sel; s += get_num_groups(0)) {
         uint2 pair = selection[s];
         uint inst = pair.x, cluster = pair.y;
         if (lid >= clusters[cluster].count) continue;
         uint tri = clusters[cluster].first + lid;
-        tris++;
-        RsPoly p;
-        bool near_clipped;
-        int nv = rs_polygon(&p, tri, inst, vertices, normals, triangles, inst_f, cam, &near_clipped);
-        clipped += near_clipped ? 1 : 0;
         float4 mat = rs_material(materials, inst, cluster, clusters[cluster].level, color_by);
         uint object_id = inst_u[inst * INST_U + INST_OBJECT];
         float weight = weights[inst];
-        bool drawn = false;
-        for (int j = 1; j + 1 < nv; ++j) {
-            RsTri t;
-            if (!rs_setup(&p, j, cam, &t)) continue;
-            drawn = true;
-            if ((ulong)(t.x1 - t.x0 + 1) * (ulong)(t.y1 - t.y0 + 1) > (ulong)large_pixels) {
-                ulong at = atom_inc(&counters[RS_LARGE]);
-                if (at < large_capacity) large[at] = (uint4)(inst, cluster, tri, (uint)j);
-                else atom_inc(&counters[RS_OVERFLOW]);
-                continue;
-            }
-            long s0 = -t.dy[0] * RS_ONE, s1 = -t.dy[1] * RS_ONE, s2 = -t.dy[2] * RS_ONE;
-            for (int y = t.y0; y <= t.y1; ++y) {
-                long E0 = rs_edge(&t, 0, t.x0, y), E1 = rs_edge(&t, 1, t.x0, y), E2 = rs_edge(&t, 2, t.x0, y);
-                for (int x = t.x0; x <= t.x1; ++x) {
-                    if (E0 >= t.bias[0] && E1 >= t.bias[1] && E2 >= t.bias[2])
-                        issued += rs_fragment(&t, E0, E1, E2, x, y, cam, light, mat, object_id, weight,
-                                              color_buf, aux_buf, &covered);
-                    E0 += s0; E1 += s1; E2 += s2;
+        for (ulong views = n_views > 1u ? masks[s] : 1ul; views; views &= views - 1ul) {
+            uint v = 63u - (uint)clz(views & (~views + 1ul));   // the lowest view left
+            __global const float* cam = cams + v * CAM_FLOATS;
+            tris++;
+            RsPoly p;
+            bool near_clipped;
+            int nv = rs_polygon(&p, tri, inst, vertices, normals, triangles, inst_f, cam, &near_clipped);
+            clipped += near_clipped ? 1 : 0;
+            bool drawn = false;
+            for (int j = 1; j + 1 < nv; ++j) {
+                RsTri t;
+                if (!rs_setup(&p, j, cam, &t)) continue;
+                drawn = true;
+                if ((ulong)(t.x1 - t.x0 + 1) * (ulong)(t.y1 - t.y0 + 1) > (ulong)large_pixels) {
+                    ulong at = atom_inc(&counters[RS_LARGE]);
+                    if (at < large_capacity) large[at] = (uint4)(inst, cluster, tri, (uint)j | (v << 16));
+                    else atom_inc(&counters[RS_OVERFLOW]);
+                    continue;
+                }
+                long s0 = -t.dy[0] * RS_ONE, s1 = -t.dy[1] * RS_ONE, s2 = -t.dy[2] * RS_ONE;
+                for (int y = t.y0; y <= t.y1; ++y) {
+                    long E0 = rs_edge(&t, 0, t.x0, y), E1 = rs_edge(&t, 1, t.x0, y), E2 = rs_edge(&t, 2, t.x0, y);
+                    for (int x = t.x0; x <= t.x1; ++x) {
+                        if (E0 >= t.bias[0] && E1 >= t.bias[1] && E2 >= t.bias[2])
+                            issued += rs_fragment(&t, E0, E1, E2, x, y, v * layer_keys, cam, light, mat, object_id,
+                                                  weight, color_buf, aux_buf, &covered);
+                        E0 += s0; E1 += s1; E2 += s2;
+                    }
                 }
             }
+            culled += drawn ? 0 : 1;
         }
-        culled += drawn ? 0 : 1;
     }
     if (tris) {
         atom_add(&counters[RS_TRIANGLES], tris);
@@ -295,26 +308,30 @@ void raster_large(__global const float4* vertices, __global const float4* normal
                   __global const uint* triangles, __global const Cluster* clusters,
                   __global const float* inst_f, __global const uint* inst_u,
                   __global const float4* materials, __global const float* weights,
-                  __global const float* cam, __global const float* light, uint color_by,
+                  __global const float* cams, __global const float* light, uint color_by,
                   __global ulong* color_buf, __global ulong* aux_buf,
                   __global const uint4* large, uint large_capacity, __global ulong* counters)
 {
     __local RsTri shared_t;
     __local float4 shared_mat;
-    __local uint shared_id;
+    __local uint shared_id, shared_view;
     __local float shared_weight;
+    uint layer_keys = (uint)cams[CAM_W] * (uint)cams[CAM_H];
     uint lid = get_local_id(0);
     ulong n = min(counters[RS_LARGE], (ulong)large_capacity);
     ulong covered = 0, issued = 0;
     for (ulong k = get_group_id(0); k < n; k += get_num_groups(0)) {
         if (lid == 0) {   // the setup once per group; its work-items share it
             uint4 item = large[k];
+            uint v = item.w >> 16;   // the view, above the fan index
+            __global const float* cam = cams + v * CAM_FLOATS;
             RsPoly p;
             RsTri t;
             bool near_clipped;
             rs_polygon(&p, item.z, item.x, vertices, normals, triangles, inst_f, cam, &near_clipped);
-            rs_setup(&p, (int)item.w, cam, &t);
+            rs_setup(&p, (int)(item.w & 0xFFFFu), cam, &t);
             shared_t = t;
+            shared_view = v;
             shared_mat = rs_material(materials, item.x, item.y, clusters[item.y].level, color_by);
             shared_id = inst_u[item.x * INST_U + INST_OBJECT];
             shared_weight = weights[item.x];
@@ -324,13 +341,15 @@ void raster_large(__global const float4* vertices, __global const float4* normal
         float4 mat = shared_mat;
         uint object_id = shared_id;
         float weight = shared_weight;
+        uint v = shared_view;
+        __global const float* cam = cams + v * CAM_FLOATS;
         int bw = t.x1 - t.x0 + 1;
         long count = (long)bw * (long)(t.y1 - t.y0 + 1);
         for (long i = lid; i < count; i += RS_LARGE_LOCAL) {
             int x = t.x0 + (int)(i % bw), y = t.y0 + (int)(i / bw);
             long E0 = rs_edge(&t, 0, x, y), E1 = rs_edge(&t, 1, x, y), E2 = rs_edge(&t, 2, x, y);
             if (E0 >= t.bias[0] && E1 >= t.bias[1] && E2 >= t.bias[2])
-                issued += rs_fragment(&t, E0, E1, E2, x, y, cam, light, mat, object_id, weight,
+                issued += rs_fragment(&t, E0, E1, E2, x, y, v * layer_keys, cam, light, mat, object_id, weight,
                                       color_buf, aux_buf, &covered);
         }
         barrier(CLK_LOCAL_MEM_FENCE);

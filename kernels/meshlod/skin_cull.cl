@@ -12,11 +12,13 @@
 // triangles, [2] culled by the frustum, [3] culled by the backface cone, [4] meshlet tests made,
 // summed per work-group in local memory (one global atomic per group and counter). An instance whose
 // hand-off weight is 0 selects nothing and makes no tests.
+// Views (`cams`: n_views cut camera records, kernels/meshlod/cut_common.cl; `cam`: view 0's by
+// value): a meshlet is dropped only when every view culls it (frustum, or backface for class 0;
+// counted as frustum-culled when every view's frustum test culls it) and is drawn into the views
+// that do not (its view mask).
 #pragma OPENCL FP_CONTRACT OFF
 #include "common/rows.cl"
 #include "meshlod/cut_common.cl"
-
-typedef struct { float v[CC_FLOATS]; } CutCamera;
 
 // sqrt of a Gershgorin bound on the largest eigenvalue of A^T A (A = rows 0..2, columns 0..2 of m):
 // >= the largest singular value, equal to it when A's columns are orthogonal (T R S joints).
@@ -64,14 +66,25 @@ inline bool sc_backfacing(float4 S, float sr, float4 cone, __global const float*
     return len > 0.0f && isfinite(len) && lhs >= rhs;
 }
 
+// How view cc treats meshlet k of class md.y < 2 (world centre w, radius r): 0 keeps it, 1 culls
+// it by the frustum, 2 (class 0) by the backface test (the one-view tests, in their order).
+inline uint sc_cull(float3 w, float r, float4 S, float sr, float4 cone, uint cls, __global const float* I,
+                    __global const float* J, uint mode, const float* cc) {
+    if ((mode & 1u) && planes_outside(w, r, cc)) return 1u;
+    if ((mode & 2u) && cls == 0u && sc_backfacing(S, sr, cone, I, J, cc)) return 2u;
+    return 0u;
+}
+
 __kernel __attribute__((reqd_work_group_size(SC_LOCAL, 1, 1)))
 void skin_cull(__global const float4* spheres, __global const float4* cones, __global const uint4* meta,
                uint first_meshlet, uint n_meshlets, uint first_cluster, uint first_instance, uint first_joint,
                float sr, __global const float* inst_f, __global const float* scales,
-               __global const float* weights, __global const float* skin, const CutCamera cam, uint mode,
-               __global uint2* selection, uint capacity, __global ulong* counters)
+               __global const float* weights, __global const float* skin, const CutCamera cam,
+               __global const float* cams, uint n_views, uint mode, __global uint2* selection,
+               __global ulong* masks, uint capacity, __global ulong* counters)
 {
     __local uint l_n[4];   // selected, their triangles, frustum-culled, backface-culled (cut_group_append)
+    __local uint l_v[2 * CUT_MAX_VIEWS];   // per view: selected, their triangles (n_views > 1)
     __local ulong l_base;
     uint inst = first_instance + (uint)get_global_id(1);
     // no early return: PoCL's work-group loops need every work-item to reach the barriers
@@ -79,34 +92,48 @@ void skin_cull(__global const float4* spheres, __global const float4* cones, __g
     const float* cc = cam.v;
     uint lid = get_local_id(0);
     if (lid == 0) { l_n[0] = 0u; l_n[1] = 0u; l_n[2] = 0u; l_n[3] = 0u; }
+    if (CUT_VIEWS(n_views) > 1u) cut_views_zero(l_v, n_views, SC_LOCAL);
     barrier(CLK_LOCAL_MEM_FENCE);
 
     uint c = get_global_id(0);
     uint slot = 0xFFFFFFFFu;
+    ulong mask = 0ul;
     if (c < n_meshlets && live) {
         uint k = first_meshlet + c;
         float4 S = spheres[k];
         uint4 md = meta[k];   // principal joint, class, triangles
         __global const float* I = inst_f + (size_t)inst * INST_F;
         __global const float* J = skin + (size_t)(first_joint + md.x) * 16;
-        bool drawn = true;
+        mask = CUT_VIEWS(n_views) == 64u ? ~0ul : (1ul << CUT_VIEWS(n_views)) - 1ul;   // class 2: every view, no test
+        bool all_outside = false;
         if (md.y < 2u) {
-            if (mode & 1u) {
-                float3 w = rows_point(I + INST_MODEL, rows_point(J, S.xyz));
-                float r = ((S.w * sr) * sc_scale(J)) * scales[inst];
-                if (planes_outside(w, r, cc)) { atomic_inc(&l_n[2]); drawn = false; }
-            }
-            if (drawn && (mode & 2u) && md.y == 0u && sc_backfacing(S, sr, cones[k], I, J, cc)) {
-                atomic_inc(&l_n[3]);
-                drawn = false;
+            float3 w = rows_point(I + INST_MODEL, rows_point(J, S.xyz));
+            float r = ((S.w * sr) * sc_scale(J)) * scales[inst];
+            float4 cone = cones[k];
+            if (CUT_VIEWS(n_views) == 1u) {
+                uint why = sc_cull(w, r, S, sr, cone, md.y, I, J, mode, cc);
+                mask = why ? 0ul : 1ul;
+                all_outside = why == 1u;
+            } else {
+                all_outside = true;
+                for (uint v = 0; v < CUT_VIEWS(n_views); ++v) {
+                    CutCamera cv = cut_view(cams, v);
+                    uint why = sc_cull(w, r, S, sr, cone, md.y, I, J, mode, cv.v);
+                    if (why) mask &= ~(1ul << v);
+                    all_outside = all_outside && why == 1u;
+                }
             }
         }
-        if (drawn) {
+        if (mask) {
             slot = atomic_inc(&l_n[0]);
             atomic_add(&l_n[1], md.z);
+            if (CUT_VIEWS(n_views) > 1u) cut_views_count(l_v, mask, md.z);
+        } else {
+            atomic_inc(&l_n[all_outside ? 2 : 3]);
         }
     }
     uint start = (uint)get_group_id(0) * SC_LOCAL;
     uint tests = start < n_meshlets && live ? min((uint)SC_LOCAL, n_meshlets - start) : 0u;
-    cut_group_append(l_n, &l_base, tests, slot, (uint2)(inst, first_cluster + c), selection, capacity, counters);
+    cut_group_append(l_n, &l_base, tests, slot, (uint2)(inst, first_cluster + c), selection, capacity, counters,
+                     l_v, n_views, mask, masks, SC_LOCAL);
 }

@@ -131,16 +131,14 @@ inline int point_position(uint func, __global const float* P, __global const flo
     return SAMPLE_DRAWN;
 }
 
-// Evaluate, transform, clip and shade one sample. On SAMPLE_DRAWN, (*fx, *fy) is its screen
-// position in pixels (inside the image), *key its colour key and *aux its attribute key.
-inline int point_sample(uint func, __global const float* P, __global const float* I,
-                        __global const float* cam, float4 mat, __global const float* light,
-                        uint object_id, float u, float v, float* fx, float* fy, ulong* key, ulong* aux) {
-    float3 pos, fu, fv;
-    pl_surface(func, u, v, P, &pos, &fu, &fv);
-    if (is_bad3(pos)) return SAMPLE_NAN;
+// Transform, clip and shade one evaluated sample for one view: ``world`` its position and
+// ``n_obj`` its (unnormalised) normal after the instance transform. On SAMPLE_DRAWN, (*fx, *fy)
+// is its screen position in pixels (inside the image), *key its colour key and *aux its
+// attribute key. A multi-view frame calls it once per view with that view's camera record.
+inline int point_view(float3 world, float3 n_obj, __global const float* cam, float4 mat,
+                      __global const float* light, uint object_id, float* fx, float* fy, ulong* key, ulong* aux) {
     __global const float* V = cam + CAM_VIEW;
-    float3 e = xform_point(V, xform_point(I + INST_MODEL, pos));
+    float3 e = xform_point(V, world);
     float depth = -e.z;
     if (!(depth >= cam[CAM_NEAR] && depth <= cam[CAM_FAR])) return SAMPLE_CLIPPED;
     float W = cam[CAM_W], H = cam[CAM_H];
@@ -148,7 +146,7 @@ inline int point_sample(uint func, __global const float* P, __global const float
     float x = (c.x / c.w * 0.5f + 0.5f) * W;
     float y = (0.5f - c.y / c.w * 0.5f) * H;
     if (!(x >= 0.0f && y >= 0.0f && x < W && y < H)) return SAMPLE_CLIPPED;
-    float3 n_view = xform_dir(V, xform_dir(I + INST_NORMAL, cross(fu, fv)));
+    float3 n_view = xform_dir(V, n_obj);
     float3 n;
     uint rgba = shade(n_view, view_dir(cam, e), mat, light, &n);
     // the AOV normal is in world space: view -> world is the transpose of the view rotation
@@ -159,6 +157,26 @@ inline int point_sample(uint func, __global const float* P, __global const float
     *key = color_key(depth, rgba);
     *aux = aux_key(depth, n_world, object_id);
     return SAMPLE_DRAWN;
+}
+
+// Evaluate one sample: SAMPLE_NAN, or SAMPLE_DRAWN with its world position and normal direction.
+inline int point_eval(uint func, __global const float* P, __global const float* I, float u, float v,
+                      float3* world, float3* n_obj) {
+    float3 pos, fu, fv;
+    pl_surface(func, u, v, P, &pos, &fu, &fv);
+    if (is_bad3(pos)) return SAMPLE_NAN;
+    *world = xform_point(I + INST_MODEL, pos);
+    *n_obj = xform_dir(I + INST_NORMAL, cross(fu, fv));
+    return SAMPLE_DRAWN;
+}
+
+// Evaluate, transform, clip and shade one sample for one view (point_eval, then point_view).
+inline int point_sample(uint func, __global const float* P, __global const float* I,
+                        __global const float* cam, float4 mat, __global const float* light,
+                        uint object_id, float u, float v, float* fx, float* fy, ulong* key, ulong* aux) {
+    float3 world, n_obj;
+    if (point_eval(func, P, I, u, v, &world, &n_obj) == SAMPLE_NAN) return SAMPLE_NAN;
+    return point_view(world, n_obj, cam, mat, light, object_id, fx, fy, key, aux);
 }
 
 // Sums four per-work-item counters over the work-group in local memory, then one atom_add each:
@@ -226,7 +244,7 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
                    uint count_at, uint capacity, __global const ulong* order,
                    __global const float* inst_f, __global const uint* inst_u,
                    __global const float* params, __global const float4* materials,
-                   __global const float* cam, __global const float* light,
+                   __global const float* cam, uint n_views, __global const float* light,
                    float factor, uint measure, float widen, uint max_side, uint color_by,
                    __global ulong* color_buf, __global ulong* aux_buf,
                    __global ulong* counters   // samples, atomics, NaN samples, capped patches, schedule
@@ -249,7 +267,7 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
             if ((uint)(order[mid] >> 32) <= c) lo = mid; else hi = mid;
         }
         uint place = lo;
-        uint W = (uint)cam[CAM_W];
+        uint W = (uint)cam[CAM_W], layer_pixels = W * (uint)cam[CAM_H];
         while (c < c_end) {   // one patch per pass: its chunks in [c, c_end)
             ulong entry = order[place];
             uint first = (uint)(entry >> 32), pid = (uint)entry;
@@ -268,23 +286,26 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
                 uint j = (c - first) * POINTS_LOCAL + get_local_id(0);
                 if (j >= total_here) continue;   // the patch's last chunk is partly empty
                 uint iu = j % g.nu, iv = j / g.nu;
-                float fx, fy;
-                ulong key, aux;
-                int r = point_sample(func, P, I, cam, mat, light, object_id,
-                                     grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu),
-                                     grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv), &fx, &fy, &key, &aux);
+                float3 world, n_obj;
+                int r = point_eval(func, P, I, grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu),
+                                   grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv), &world, &n_obj);
                 n_samples++;
 #ifdef PL_RECORD
                 rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;
 #endif
-                if (r == SAMPLE_NAN) n_nan++;
-                if (r != SAMPLE_DRAWN) continue;
-                uint pix = (uint)fy * W + (uint)fx;
+                if (r == SAMPLE_NAN) { n_nan++; continue; }
+                // one evaluation, shaded and written into every view whose frustum holds it
+                for (uint view = 0; view < n_views; ++view) {
+                    float fx, fy;
+                    ulong key, aux;
+                    if (point_view(world, n_obj, cam + view * CAM_FLOATS, mat, light, object_id,
+                                   &fx, &fy, &key, &aux) != SAMPLE_DRAWN) continue;
+                    uint pix = (uint)fy * W + (uint)fx;
 #ifdef PL_RECORD
-                rec_pix[rec_offset[pid] + j] = pix;
-                rec_key[rec_offset[pid] + j] = key;
+                    if (view == 0u) { rec_pix[rec_offset[pid] + j] = pix; rec_key[rec_offset[pid] + j] = key; }
 #endif
-                n_atomics += write_point(color_buf, aux_buf, pix, key, aux);
+                    n_atomics += write_point(color_buf, aux_buf, view * layer_pixels + pix, key, aux);
+                }
             }
             place++;
         }

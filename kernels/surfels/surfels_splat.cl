@@ -1,12 +1,24 @@
-// Surfel prefix renderer: one work-item per surfel of the prefix draws an oriented disc of radius
-// `radius` (view units) into the shared 64-bit key buffers (keys.cl), so surfels and parametric
-// objects compose by depth in one Frame. Each pixel centre in the disc's conservative screen box
-// casts its camera ray (any projection: through the inverse projection) against the disc's plane.
-// With a hand-off mesh (paramlod/scene/handoff.py) pixels whose dither (keys.cl pl_dither) is below
-// `mesh_weight` are left to the mesh (0: every pixel is the surfels').
+// Surfel prefix renderer: one work-item per surfel of the prefix draws an oriented disc into the
+// shared 64-bit key buffers (keys.cl), so surfels and parametric objects compose by depth in one
+// Frame. A multi-view frame (paramlod.render_views) reads the surfel once and splats it into every
+// view whose frustum holds it, view v into layer v of the layered buffers (pixel v*W*H + y*W + x).
+// Each pixel centre in the disc's conservative screen box casts its camera ray (any projection:
+// through the inverse projection) against the disc's plane. With a hand-off mesh
+// (paramlod/scene/handoff.py) pixels whose dither (keys.cl pl_dither) is below the view's
+// mesh weight are left to the mesh (0: every pixel is the surfels'; 1: the view draws none).
 // numpy twin: paramlod/surfels/build/reference.py splat_discs (coverage and depth keys bit-identical).
 #pragma OPENCL FP_CONTRACT OFF
 #include "common/rows.cl"
+
+// The per-view draw record (paramlod/surfels/render.py view_records, VIEW_FLOATS): the object's
+// model-view rows (12 floats) and normal-matrix rows (12: inverse transpose), the inverse
+// projection (16, rows), the disc radius in view units, the mesh weight.
+#define SF_VIEW_FLOATS 42
+#define SFV_XF 0
+#define SFV_INV_PROJ 24
+#define SFV_RADIUS 40
+#define SFV_MESH_WEIGHT 41
+#define SF_COUNTERS 4   // per view: surfels drawn, colour atomics, pixels covered, not finite
 
 inline float sf_dot(float3 a, float3 b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
 
@@ -27,24 +39,20 @@ inline float3 sf_screen(__global const float* P, float3 e, float W, float H) {
     return (float3)((cx / cw * 0.5f + 0.5f) * W, (0.5f - cy / cw * 0.5f) * H, cw);
 }
 
-// xf: model-view rows (12 floats), then the normal matrix rows (12 floats: inverse transpose).
-// counters: surfels drawn, colour atomics issued, pixels covered, surfels skipped as not finite.
-__kernel void surfels_splat(__global const float4* pos, __global const float4* nrm,
-                            __global const float4* albedo, uint n, float radius,
-                            __global const float* xf, __global const float* cam,
-                            __global const float* inv_proj, __global const float* light,
-                            float specular, uint object_id, float mesh_weight,
-                            __global ulong* color_buf, __global ulong* aux_buf,
-                            __global ulong* counters)
-{
-    uint i = get_global_id(0);
-    if (i >= n) return;
+// One surfel (object-space position p and normal n_obj) into one view: `rec` its draw record,
+// `cam` its camera record, `layer` the first key of its layer, `counters` its SF_COUNTERS.
+inline void sf_splat_view(float3 p, float3 n_obj, float4 mat, __global const float* rec,
+                          __global const float* cam, __global const float* light, uint object_id,
+                          __global ulong* color_buf, __global ulong* aux_buf, uint layer,
+                          __global ulong* counters) {
     float W = cam[CAM_W], H = cam[CAM_H], near = cam[CAM_NEAR], far = cam[CAM_FAR];
     uint iw = (uint)W, ih = (uint)H;
     __global const float* P = cam + CAM_PROJ;
     __global const float* V = cam + CAM_VIEW;
-    float3 e = rows_point(xf, pos[i].xyz);
-    float3 nv = rows_dir(xf + 12, nrm[i].xyz);
+    __global const float* inv_proj = rec + SFV_INV_PROJ;
+    float radius = rec[SFV_RADIUS], mesh_weight = rec[SFV_MESH_WEIGHT];
+    float3 e = rows_point(rec + SFV_XF, p);
+    float3 nv = rows_dir(rec + SFV_XF + 12, n_obj);
     float r2 = radius * radius;
 
     if (is_bad3(e) || is_bad3(nv) || !(radius > 0.0f)) { atom_add(&counters[3], (ulong)1); return; }
@@ -68,8 +76,6 @@ __kernel void surfels_splat(__global const float4* pos, __global const float4* n
         px1 = min((int)ceil(fmin(x1, W + 2.0f)) + 1, (int)iw - 1); py1 = min((int)ceil(fmin(y1, H + 2.0f)) + 1, (int)ih - 1);
     }
 
-    float4 mat = albedo[i];
-    mat.w = specular;
     ulong issued = 0, covered = 0;
     for (int y = py0; y <= py1; ++y) {
         float ny = 1.0f - ((float)y + 0.5f) / H * 2.0f;
@@ -92,11 +98,34 @@ __kernel void surfels_splat(__global const float4* pos, __global const float4* n
                                       V[1] * nn.x + V[5] * nn.y + V[9] * nn.z,
                                       V[2] * nn.x + V[6] * nn.y + V[10] * nn.z);
             covered++;
-            issued += write_point(color_buf, aux_buf, (uint)y * iw + (uint)x,
+            issued += write_point(color_buf, aux_buf, layer + (uint)y * iw + (uint)x,
                                   color_key(depth, rgba), aux_key(depth, n_world, object_id));
         }
     }
     atom_add(&counters[0], (ulong)1);
     atom_add(&counters[1], issued);
     atom_add(&counters[2], covered);
+}
+
+// views: n_views draw records of SF_VIEW_FLOATS; cam: n_views camera records; counters:
+// SF_COUNTERS per view.
+__kernel void surfels_splat(__global const float4* pos, __global const float4* nrm,
+                            __global const float4* albedo, uint n,
+                            __global const float* views, __global const float* cam, uint n_views,
+                            __global const float* light, float specular, uint object_id,
+                            __global ulong* color_buf, __global ulong* aux_buf,
+                            __global ulong* counters)
+{
+    uint i = get_global_id(0);
+    if (i >= n) return;
+    float3 p = pos[i].xyz, n_obj = nrm[i].xyz;
+    float4 mat = albedo[i];
+    mat.w = specular;
+    uint layer_pixels = (uint)cam[CAM_W] * (uint)cam[CAM_H];
+    for (uint v = 0; v < n_views; ++v) {
+        __global const float* rec = views + v * SF_VIEW_FLOATS;
+        if (!(rec[SFV_MESH_WEIGHT] < 1.0f)) continue;   // the object is outside the view, or the mesh's there
+        sf_splat_view(p, n_obj, mat, rec, cam + v * CAM_FLOATS, light, object_id, color_buf, aux_buf,
+                      v * layer_pixels, counters + v * SF_COUNTERS);
+    }
 }

@@ -6,6 +6,9 @@
 //             outer level from the screen length of that edge itself, measured here from 8
 //             samples of the edge. Two patches that share an edge measure it from the same
 //             parameters, so they compute the same outer level and their vertices on it coincide.
+//             Multi-view geometry-stage passes (PL_VIEWS): each outer level is the largest any
+//             view that sees the edge needs (the inner levels come from the LOD stage's
+//             extents, already the largest over the views).
 // The parameter range handed to the evaluation stage is widened by u_overlap of its size per
 // side (clamped to the function's domain) so that T-junctions between patches of different size
 // are covered.
@@ -47,6 +50,50 @@ void main() {
             vec4 c = vec4(r.z, r.z, r.z, r.w);   // edge start v
             vec4 d = vec4(r.w, r.z, r.w, r.w);   // edge end v
             float len[4] = float[4](0.0, 0.0, 0.0, 0.0);
+#ifdef PL_VIEWS
+            // the 32 samples' world positions once (one call site of pl_position), then each
+            // view's screen polyline of each edge. A view counts for an edge unless every sample
+            // lies beyond one of its clip planes (x = +-w, y = +-w, the near plane): such a view
+            // does not see the edge, and a view beside or behind it would ask for a needlessly
+            // fine level (the finest, behind its near plane)
+            vec3 wp[32];
+            bool ok[32];
+            for (int k = 0; k < 32; ++k) {
+                int e = k >> 3;
+                float f = float(k & 7) / 7.0;
+                vec3 p = pl_position(func, pl_lerp(a[e], b[e], f), pl_lerp(c[e], d[e], f), P);
+                ok[k] = !pl_bad3(p);
+                wp[k] = ok[k] ? pl_rows_point(M, p) : vec3(0.0);
+            }
+            for (int view = 0; view < u_n_views; ++view) {
+                mat4 V = pl_views[view].view, Pr = pl_views[view].proj;
+                float zn = pl_views[view].near.x;
+                for (int e = 0; e < 4; ++e) {
+                    float l = 0.0;
+                    vec2 prev = vec2(0.0);
+                    int prev_state = 2;
+                    int seen = 0;   // bit per clip plane: some sample on its inner side
+                    for (int i = 0; i < 8; ++i) {
+                        int state = 2;                       // 0 ok, 1 behind the near plane, 2 NaN/inf
+                        vec2 s = vec2(0.0);
+                        if (ok[e * 8 + i]) {
+                            vec4 q = Pr * (V * vec4(wp[e * 8 + i], 1.0));
+                            state = q.w >= zn ? 0 : 1;
+                            s = vec2((q.x / q.w * 0.5 + 0.5) * u_screen.x, (0.5 - q.y / q.w * 0.5) * u_screen.y);
+                            seen |= (q.x >= -q.w ? 1 : 0) | (q.x <= q.w ? 2 : 0) | (q.y >= -q.w ? 4 : 0)
+                                  | (q.y <= q.w ? 8 : 0) | (state == 0 ? 16 : 0);
+                        }
+                        if (i > 0) {
+                            if (state == 1 || prev_state == 1) l = PL_INF;   // unmeasurable: finest
+                            else if (state == 0 && prev_state == 0) l += length(s - prev);
+                        }
+                        prev = s;
+                        prev_state = state;
+                    }
+                    if (seen == 31) len[e] = max(len[e], l);
+                }
+            }
+#else
             for (int e = 0; e < 4; ++e) {
                 vec2 prev = vec2(0.0);
                 int prev_state = 2;
@@ -68,6 +115,7 @@ void main() {
                     prev_state = state;
                 }
             }
+#endif
             float L = u_level.y;
             gl_TessLevelOuter[0] = pl_adaptive(len[0], L, u_threshold.y);
             gl_TessLevelOuter[1] = pl_adaptive(len[1], L, u_threshold.x);

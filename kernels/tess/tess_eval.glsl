@@ -7,6 +7,14 @@ patch in vec4 tc_range;
 patch in vec4 tc_core;
 patch in uint tc_inst;
 
+#ifdef PL_VIEWS
+// multi-view: world space, which the geometry stage (tess_geometry.glsl) takes into each view
+out vec3 tw_world;           // world-space position
+out vec3 tw_normal;          // world-space normal (not normalized)
+out float tw_bad;            // as te_bad
+flat out vec4 tw_material;
+flat out uint tw_object;
+#else
 // centroid: with multisampling a partly covered pixel interpolates inside the triangle, so the
 // depth, normal and shading of edge pixels are never extrapolated beyond the surface
 centroid out vec3 te_view;            // view-space position
@@ -14,6 +22,7 @@ centroid out vec3 te_normal;          // view-space unit normal (not yet facing 
 centroid out float te_bad;            // 1 at a vertex where f is NaN/inf: the fragment stage drops its triangles
 flat out vec4 te_material;   // rgb, specular
 flat out uint te_object;     // 1-based object id
+#endif
 
 void main() {
     uint inst = tc_inst;
@@ -34,20 +43,31 @@ void main() {
         n = cross(du1, dv1);
         if (dot(n, n) > 1e-12 * dot(du1, du1) * dot(dv1, dv1) || pl_bad3(pos)) break;
     }
-    te_bad = 0.0;
+    float bad = 0.0;
     if (pl_bad3(pos)) {
         atomicAdd(pl_nan_vertices, 1u);
-        te_bad = 1.0;
+        bad = 1.0;
         pos = vec3(0.0);
         n = vec3(0.0, 0.0, 1.0);
     }
     uint I = inst * PL_INST_F;
-    vec3 e = (u_view * vec4(pl_rows_point(I + PL_INST_MODEL, pos), 1.0)).xyz;
+    vec3 world = pl_rows_point(I + PL_INST_MODEL, pos);
+#ifdef PL_VIEWS
+    tw_world = world;
+    tw_normal = pl_rows_dir(I + PL_INST_NORMAL, n);
+    tw_bad = bad;
+    tw_material = pl_materials[inst];
+    tw_object = pl_inst_u[inst * PL_INST_U + PL_INST_OBJECT];
+    gl_Position = vec4(world, 1.0);   // unused: each view's position is the geometry stage's
+#else
+    vec3 e = (u_view * vec4(world, 1.0)).xyz;
     vec3 nv = mat3(u_view) * pl_rows_dir(I + PL_INST_NORMAL, n);
     float ln = length(nv);
     te_normal = (ln > 1e-30 && !isnan(ln) && !isinf(ln)) ? nv / ln : vec3(0.0);
     te_view = e;
+    te_bad = bad;
     te_material = pl_materials[inst];
     te_object = pl_inst_u[inst * PL_INST_U + PL_INST_OBJECT];
     gl_Position = u_proj * vec4(e, 1.0);
+#endif
 }

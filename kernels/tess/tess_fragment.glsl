@@ -3,6 +3,7 @@
 // attachments:
 //   0 colour RGBA16F (linear RGB, alpha 1: alpha 0 = nothing drawn), 1 linear view depth R32F,
 //   2 world-space normal facing the viewer RGBA16F, 3 object id R32UI.
+// Multi-view geometry-stage passes (PL_VIEWS): the same, for the view of the layer drawn into.
 centroid in vec3 te_view;
 centroid in vec3 te_normal;
 centroid in float te_bad;
@@ -26,6 +27,10 @@ void main() {
     vec3 rgb = pl_shade_rgb(n, ev, te_material.xyz, te_material.w, u_light.xyz, u_light.w);
     out_color = vec4(clamp(rgb, 0.0, 1.0), 1.0);
     out_depth = -te_view.z;
+#ifdef PL_VIEWS
+    out_normal = vec4(transpose(mat3(pl_views[gl_Layer].view)) * n, 0.0);   // the layer is the view
+#else
     out_normal = vec4(transpose(mat3(u_view)) * n, 0.0);
+#endif
     out_object = te_object;
 }

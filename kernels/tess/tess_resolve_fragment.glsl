@@ -9,6 +9,30 @@
 //           never read; the loop runs over the samples the device really
 //           allocated, which can be more than requested: llvmpipe gives 4 for a 2xMS request), +inf / 0 / 0 where no sample is covered. This matches
 //           the point renderer, whose atom_min keeps the nearest sample of a pixel.
+#if defined(PL_LAYERED)
+// one layer (view) of a multi-view frame's texture arrays; u_color: the hardware resolve of that
+// layer (a blit, so a plain texture) or, without multisampling, the colour array itself
+uniform int u_layer;
+#ifdef PL_MS
+uniform sampler2DMSArray u_coverage;
+uniform sampler2DMSArray u_depth;
+uniform sampler2DMSArray u_normal;
+uniform usampler2DMSArray u_object;
+#define PL_FETCH(t, q, s) texelFetch(t, ivec3(q, u_layer), s)
+#define PL_DEVICE_SAMPLES textureSamples(u_depth)
+uniform sampler2D u_color;
+#define PL_COLOR(q) texelFetch(u_color, q, 0)
+#else
+uniform sampler2DArray u_coverage;
+uniform sampler2DArray u_depth;
+uniform sampler2DArray u_normal;
+uniform usampler2DArray u_object;
+#define PL_FETCH(t, q, s) texelFetch(t, ivec3(q, u_layer), 0)
+#define PL_DEVICE_SAMPLES 1
+uniform sampler2DArray u_color;
+#define PL_COLOR(q) texelFetch(u_color, ivec3(q, u_layer), 0)
+#endif
+#else
 #ifdef PL_MS
 uniform sampler2DMS u_coverage;   // the multisampled colour: alpha 1 where drawn
 uniform sampler2DMS u_depth;
@@ -25,6 +49,8 @@ uniform usampler2D u_object;
 #define PL_DEVICE_SAMPLES 1
 #endif
 uniform sampler2D u_color;
+#define PL_COLOR(q) texelFetch(u_color, q, 0)
+#endif
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out float out_depth;
@@ -42,7 +68,7 @@ void main() {
     for (int sy = 0; sy < PL_SS; ++sy) {
         for (int sx = 0; sx < PL_SS; ++sx) {
             ivec2 q = p * PL_SS + ivec2(sx, sy);
-            c += texelFetch(u_color, q, 0);
+            c += PL_COLOR(q);
             for (int s = 0; s < ns; ++s) {
                 if (PL_FETCH(u_coverage, q, s).a == 0.0) continue;
                 float d = PL_FETCH(u_depth, q, s).r;

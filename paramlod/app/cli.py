@@ -8,7 +8,7 @@ import os
 import sys
 from pathlib import Path
 
-from paramlod.app import dist, gallery, glyphs, mesh_cmd, scenefile, surfels_cmd
+from paramlod.app import dist, gallery, glyphs, mesh_cmd, scenefile, surfels_cmd, views_cmd
 from paramlod.app.args import (Parser, add_size, add_stats, check_outputs, install_warning_format, positive_int, progress,
                                run_reporting_errors, write_all_or_none)
 from paramlod.app.bench import run as bench
@@ -36,6 +36,11 @@ def _finite_time(text: str) -> float:
 
 
 def cmd_render(args) -> int:
+    if views_cmd.requested(args):
+        if _render_job_requested(args):
+            raise ParamlodError("--stereo, --cubemap and --quilt render one multi-view frame of one scene; "
+                                "they do not combine with several scenes or a job of frames")
+        return views_cmd.run(args)
     if _render_job_requested(args):
         if args.time is not None:
             raise ParamlodError("--time is for one frame; a job of frames takes its times from --frames/--fps")
@@ -146,6 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_stats(r)
     r.add_argument("--time", type=_finite_time, metavar="T",
                    help="scene time of the frame (the implicit parameter t of animated functions; default 0)")
+    views_cmd.add_arguments(r)
     a = r.add_argument_group("frames (a job: each frame is a task, see docs/scale-out.md)")
     a.add_argument("--frames", type=dist.parse_range, metavar="A:B",
                    help="frames A to B-1 (A:B:STEP, one number, or 'all' of the [animation] table); frame i is "

@@ -4,19 +4,31 @@ Same sample positions, same segment rules, same split patterns, in float32 where
 computes in float32 (parameter positions, projection). Function values come from numpy in float64
 and are rounded to float32, so screen lengths can differ from the kernel's in the last bits; a
 split decision can only differ where an extent lies within that rounding of the threshold.
+
+Several views (the camera records of a ``paramlod.core.views.Views``, one after another or as rows):
+each patch is measured in every view; it is culled only if no view sees it (a view sees it when its
+samples' outcode AND is 0), and otherwise decided on the most demanding measures over the views
+that see it (maxima of the lines' lengths, longest segments and w_u, w_v; OR of the mixed lines;
+the union of the screen boxes), as the kernel.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from paramlod.core.layouts import CAMERA
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, FLAG_FORCED, initial_patches
 from paramlod.lod.stage import check_budget
 
 F = np.float32
 
 
-def _project(scene_inst, functions, cam, inst, u, v):
-    """Screen position, state (0 front, 1 behind near plane, 2 bad) and outcode, per sample."""
+def camera_rows(cam) -> np.ndarray:
+    """float32 (N, CAM_FLOATS) of N camera records given one after another or as rows."""
+    return np.asarray(cam, np.float32).reshape(-1, CAMERA.length)
+
+
+def _world(scene_inst, functions, inst, u, v):
+    """World positions (after the instance transform) and the bad mask, per sample."""
     inst_f, inst_u, params = scene_inst
     shape = u.shape
     pos = np.full(shape + (3,), np.nan, np.float32)
@@ -28,15 +40,23 @@ def _project(scene_inst, functions, cam, inst, u, v):
     bad = ~np.all(np.isfinite(pos), axis=-1)
     M = inst_f[inst, 0:16].reshape(shape + (4, 4))
     p4 = np.concatenate([pos, np.ones(shape + (1,), np.float32)], axis=-1)
+    with np.errstate(over="ignore", invalid="ignore"):   # overflowing samples are bad in every view
+        w = np.einsum("...ij,...j->...i", M[..., :3, :], p4)
+    return w, bad
+
+
+def _project(w, bad, cam):
+    """Screen position, state (0 front, 1 behind near plane, 2 bad) and outcode, per sample, of
+    world positions ``w`` seen by one camera record."""
+    shape = bad.shape
     view = cam[0:16].reshape(4, 4)
     proj = cam[16:32].reshape(4, 4)
     with np.errstate(over="ignore", invalid="ignore"):   # overflowing samples are marked bad below
-        w = np.einsum("...ij,...j->...i", M[..., :3, :], p4)
         e = np.einsum("ij,...j->...i", view[:3, :], np.concatenate([w, np.ones(shape + (1,), np.float32)], axis=-1))
         c = np.einsum("ij,...j->...i", proj, np.concatenate([e, np.ones(shape + (1,), np.float32)], axis=-1))
-    bad |= ~np.all(np.isfinite(c), axis=-1)   # overflowed on the way to clip space (kernel: lod_sample)
+    bad = bad | ~np.all(np.isfinite(c), axis=-1)   # overflowed on the way to clip space (kernel: lod_project)
     x, y, z, cw = c[..., 0], c[..., 1], c[..., 2], c[..., 3]
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):   # screen positions only where in front
         code = ((x < -cw) * 1 | (x > cw) * 2 | (y < -cw) * 4 | (y > cw) * 8 | (z < -cw) * 16 | (z > cw) * 32).astype(np.uint32)
         front = cw >= cam[34]
         sx = (x / cw * F(0.5) + F(0.5)) * cam[32]
@@ -96,8 +116,46 @@ def boundary_measures(seg_u, seg_v, s_g, st_g, msu_line, msv_line):
     return raise_measure(su, nu_b), raise_measure(sv, nv_b)
 
 
+def _view_measures(rows, cols, grid):
+    """One view's measures of n patches from its projected samples ((s, state, code) of the
+    u-lines, the v-lines (n, 4, 8) and the 5x5 grid (n, 5, 5)): code (n,), eu, ev (n, 4), msu,
+    msv, w_u, w_v (n,), mixed (n, 8: u-lines then v-lines), box (n, 4)."""
+    (s_r, st_r, c_r), (s_c, st_c, c_c), (s_g, st_g, c_g) = rows, cols, grid
+    n = len(s_r)
+    code = (np.bitwise_and.reduce(c_r.reshape(n, 32), axis=1) & np.bitwise_and.reduce(c_c.reshape(n, 32), axis=1)
+            & np.bitwise_and.reduce(c_g.reshape(n, 25), axis=1))
+    seg_u, seg_v = _seg(s_r, st_r), _seg(s_c, st_c)
+    eu = np.zeros((n, 4), np.float32)
+    ev = np.zeros((n, 4), np.float32)
+    for k in range(7):  # sequential float32 sums, as in the kernel
+        eu += seg_u[:, :, k]
+        ev += seg_v[:, :, k]
+    w_u, w_v = boundary_measures(seg_u, seg_v, s_g, st_g, seg_u.max(axis=2), seg_v.max(axis=2))
+    allpts = np.concatenate([s_r.reshape(n, 32, 2), s_c.reshape(n, 32, 2), s_g.reshape(n, 25, 2)], axis=1)
+    front = np.concatenate([st_r.reshape(n, 32), st_c.reshape(n, 32), st_g.reshape(n, 25)], axis=1) == 0
+    big = np.float32(np.inf)
+    box = np.stack([np.where(front, allpts[..., 0], big).min(axis=1), np.where(front, allpts[..., 1], big).min(axis=1),
+                    np.where(front, allpts[..., 0], -big).max(axis=1), np.where(front, allpts[..., 1], -big).max(axis=1)],
+                   axis=1)
+    # lines with both bad and good samples split like long ones (lod.cl: edges of the defined part)
+    bad_r, bad_c = (st_r == 2).sum(axis=2), (st_c == 2).sum(axis=2)    # (n, 4) per line
+    mixed = np.concatenate([(bad_r > 0) & (bad_r < 8) & (eu > MIXED_MIN_PX),   # ... while the good part
+                            (bad_c > 0) & (bad_c < 8) & (ev > MIXED_MIN_PX)], axis=1)   # is over a pixel
+    return {"code": code, "eu": eu, "ev": ev, "msu": seg_u.max(axis=(1, 2)), "msv": seg_v.max(axis=(1, 2)),
+            "w_u": w_u, "w_v": w_v, "mixed": mixed, "box": box}
+
+
+def _most(x, seen):
+    """Max over the views that see each patch (axis 0) of float32 measures >= 0, as the kernel takes
+    it: the largest float bits (NaN included), 0 where no view sees the patch."""
+    bits = np.ascontiguousarray(x, np.float32).view(np.uint32)
+    seen = seen.reshape(seen.shape + (1,) * (bits.ndim - seen.ndim))
+    return np.where(seen, bits, np.uint32(0)).max(axis=0).view(np.float32)
+
+
 def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
-    """One PATCH SUBDIVISION step. Returns (children, render patches, stats)."""
+    """One PATCH SUBDIVISION step; ``cam``: one or more camera records (``camera_rows``).
+    Returns (children, render patches, stats)."""
     n = len(patches)
     r = patches["range"].astype(np.float32)
     u0, u1, v0, v1 = (r[:, i:i + 1] for i in range(4))
@@ -115,34 +173,25 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
     gv = v0[:, :, None] + dv[:, :, None] * g[None, :, None]          # (n, 5, 1) over j
     gu, gv = np.broadcast_to(gu, (n, 5, 5)), np.broadcast_to(gv, (n, 5, 5))
     ii = np.broadcast_to(inst[:, None, None], (n, 4, 8))
-    s_r, st_r, c_r = _project(scene_inst, functions, cam, ii, ru, rv)
-    s_c, st_c, c_c = _project(scene_inst, functions, cam, ii, cu, cv)
-    s_g, st_g, c_g = _project(scene_inst, functions, cam, np.broadcast_to(inst[:, None, None], (n, 5, 5)), gu, gv)
+    # f once per sample, then every view
+    world = (_world(scene_inst, functions, ii, ru, rv), _world(scene_inst, functions, ii, cu, cv),
+             _world(scene_inst, functions, np.broadcast_to(inst[:, None, None], (n, 5, 5)), gu, gv))
+    per_view = [_view_measures(*(_project(w, bad, c) for w, bad in world)) for c in camera_rows(cam)]
+    m = {k: np.stack([pv[k] for pv in per_view]) for k in per_view[0]}   # (views, n, ...)
 
-    code = (np.bitwise_and.reduce(c_r.reshape(n, -1), axis=1) & np.bitwise_and.reduce(c_c.reshape(n, -1), axis=1)
-            & np.bitwise_and.reduce(c_g.reshape(n, -1), axis=1))
-    seg_u, seg_v = _seg(s_r, st_r), _seg(s_c, st_c)
-    eu = np.zeros((n, 4), np.float32)
-    ev = np.zeros((n, 4), np.float32)
-    for k in range(7):  # sequential float32 sums, as in the kernel
-        eu += seg_u[:, :, k]
-        ev += seg_v[:, :, k]
-    msu, msv = seg_u.max(axis=(1, 2)), seg_v.max(axis=(1, 2))
-    w_u, w_v = boundary_measures(seg_u, seg_v, s_g, st_g, seg_u.max(axis=2), seg_v.max(axis=2))
-    allpts = np.concatenate([s_r.reshape(n, -1, 2), s_c.reshape(n, -1, 2), s_g.reshape(n, -1, 2)], axis=1)
-    front = np.concatenate([st_r.reshape(n, -1), st_c.reshape(n, -1), st_g.reshape(n, -1)], axis=1) == 0
+    seen = m["code"] == 0
+    culled = ~seen.any(axis=0)
+    eu, ev = _most(m["eu"], seen), _most(m["ev"], seen)
+    msu, msv = _most(m["msu"], seen), _most(m["msv"], seen)
+    w_u, w_v = _most(m["w_u"], seen), _most(m["w_v"], seen)
+    mixed = (m["mixed"] & seen[:, :, None]).any(axis=0)
+    mu_, mv_ = mixed[:, :4], mixed[:, 4:]
     big = np.float32(np.inf)
-    bx0 = np.where(front, allpts[..., 0], big).min(axis=1)
-    by0 = np.where(front, allpts[..., 1], big).min(axis=1)
-    bx1 = np.where(front, allpts[..., 0], -big).max(axis=1)
-    by1 = np.where(front, allpts[..., 1], -big).max(axis=1)
+    lo = np.where(seen[:, :, None], m["box"][:, :, :2], big).min(axis=0)
+    hi = np.where(seen[:, :, None], m["box"][:, :, 2:], -big).max(axis=0)
+    bx0, by0, bx1, by1 = lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]
 
-    culled = code != 0
     tu, tv = F(t_u), F(t_v)
-    # lines with both bad and good samples split like long ones (lod.cl: edges of the defined part)
-    bad_r, bad_c = (st_r == 2).sum(axis=2), (st_c == 2).sum(axis=2)    # (n, 4) per line
-    mu_ = (bad_r > 0) & (bad_r < 8) & (eu > MIXED_MIN_PX)   # ... while the good part is over a pixel
-    mv_ = (bad_c > 0) & (bad_c < 8) & (ev > MIXED_MIN_PX)
     a = (eu[:, 0] > tu) | (eu[:, 1] > tu) | mu_[:, 0] | mu_[:, 1]
     b = (eu[:, 2] > tu) | (eu[:, 3] > tu) | mu_[:, 2] | mu_[:, 3]
     c = (ev[:, 0] > tv) | (ev[:, 1] > tv) | mv_[:, 0] | mv_[:, 1]
@@ -183,8 +232,9 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
     return children, rp, stats
 
 
-def run_lod(scene, cam_record, settings, functions=None):
-    """The whole LOD stage in numpy: returns (render patches, per-step stats)."""
+def run_lod(scene, camera_records, settings, functions=None):
+    """The whole LOD stage in numpy for one or more views (``camera_records``: their records one
+    after another, or as rows): returns (render patches, per-step stats)."""
     functions = functions or scene.functions()
     inst = scene.instance_buffers()
     patches = initial_patches(inst[0][:, 28:32], settings.initial_grid)
@@ -193,7 +243,7 @@ def run_lod(scene, cam_record, settings, functions=None):
         if len(patches) == 0:
             steps.append({"step": step, "in": 0, "split": 0, "culled": 0, "out": 0, "forced": 0})
             continue
-        patches, rp, st = lod_step(patches, inst, functions, cam_record.astype(np.float32),
+        patches, rp, st = lod_step(patches, inst, functions, camera_rows(camera_records),
                                    settings.threshold[0], settings.threshold[1], step,
                                    step == settings.max_steps)
         out.append(rp)

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from paramlod.core.layouts import LOD_COUNTER, constant
+from paramlod.core.layouts import CAMERA, LOD_COUNTER, constant
+from paramlod.core.views import MAX_VIEWS
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, SceneError
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, initial_patches
@@ -72,15 +73,40 @@ C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED = (
     LOD_COUNTER.offset(f) for f in ("children", "split", "culled", "rendered", "forced"))
 LOD_RENDER_TOTAL = LOD_COUNTER.constant("LOD_RENDER_TOTAL")   # counters[0, 1]: the render list's length
 LOD_LOCAL = constant("LOD_LOCAL")   # work-items measuring one patch together (kernels/lod/lod.cl)
+# views one work-group projects at once (local memory: 89 x 9 bytes a view)
+LOD_MAX_SLOTS = 8
+LOD_MAX_GROUP = 256   # work-items a patch at most (every OpenCL GPU takes 256)
+
+
+def lod_layout(n_views: int, max_group: int = LOD_MAX_GROUP) -> tuple[int, int]:
+    """(work-items per patch, view slots per chunk) of the LOD kernel for ``n_views`` views:
+    LOD_LOCAL work-items a slot, as one view has, up to LOD_MAX_SLOTS slots and LOD_MAX_GROUP
+    work-items; more views take chunks of slots in turn. A step's patches are mostly fewer than
+    the device's work-groups, so a step lasts about as long as one patch takes, and more views
+    need more work-items per patch to take no longer (H200, 48 views: the LOD stage 1.4-2.1x one
+    view's time, 3.2-3.9x with 32 work-items). ``max_group``: the most the device takes, a power
+    of two."""
+    slots = min(1 << (int(n_views) - 1).bit_length(), LOD_MAX_SLOTS)
+    return min(LOD_LOCAL * slots, max_group, LOD_MAX_GROUP), slots
 
 
 class LodStage:
+    """The LOD stage for one camera or for several at once (``n_views``): with several, a patch is
+    measured in every view, culled only if no view sees it, and otherwise split if it is too large
+    in any view that sees it (its measures are the maxima over those views, its screen box their
+    union; kernels/lod/lod.cl). One render list serves all the views."""
+
     def __init__(self, functions):
-        prog = build(["lod/lod.cl"], functions)
-        # one kernel object per step with its arguments bound once (they change only when a
-        # buffer grows or the scene, camera buffer or threshold changes): a frame only enqueues
-        self._step_kernels = [cl.Kernel(prog, "lod_step") for _ in range(15)]
-        self._bound = None
+        self._functions = functions
+        dev = cl_device()
+        # the largest power of two of work-items per group the device takes
+        self._max_group = 1 << (min(dev.device.max_work_group_size, LOD_MAX_GROUP).bit_length() - 1)
+        # per kernel layout (lod_layout): one kernel object per step with its arguments bound once
+        # (they change only when a buffer grows or the scene, camera buffer, views or threshold
+        # change): a frame only enqueues. The single-view program is built now, others when used.
+        self._step_kernels: dict[tuple[int, int], list] = {}
+        self._bound: dict[tuple[int, int], tuple] = {}
+        self._kernels(1)
         self.bufs = [_Buffer(EVAL_DTYPE, 4096), _Buffer(EVAL_DTYPE, 4096)]
         self.render = _Buffer(RENDER_DTYPE, 4096)
         # PATCH INITIALIZATION's output, built and uploaded only when the instances change
@@ -99,36 +125,38 @@ class LodStage:
         self._depth: dict[tuple, int] = {}
         self._depth_key = None
         self.events = []   # the last enqueued stage's kernel events (device timing)
-        dev = cl_device()
-        # work-groups per step (they stride over the patches): enough to fill the device
+        # work-groups of LOD_LOCAL per step (they stride over the patches): enough to fill the device
         self.max_groups = dev.device.max_compute_units * (64 if dev.is_gpu else 16)
 
-    def run(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
-        """Returns (render buffer, render patch count, per-step stats list, ms).
+    def run(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1):
+        """Returns (render buffer, render patch count, per-step stats list, ms). ``cam_buf`` holds
+        ``n_views`` camera records one after another (``SceneBuffers.upload``'s "cam", "n_views").
 
         All steps are enqueued at once and the counters read back once; if a buffer overflowed,
         the buffers grow and the whole stage is redone (growth persists across frames).
         """
         t0 = time.perf_counter()
         while True:
-            self.enqueue(inst, domains, cam_buf, settings, t_div)
+            self.enqueue(inst, domains, cam_buf, settings, t_div, n_views)
             self.read_counters()
             if not self.grow(settings):
                 break
         n_render, steps = self.result()
         return self.render.buf, n_render, steps, (time.perf_counter() - t0) * 1e3
 
-    def enqueue(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0):
+    def enqueue(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1):
         """Enqueue the whole stage without waiting: the render list lands in ``self.render.buf``
         and its length in ``self.counters[LOD_RENDER_TOTAL]`` on the device, for a renderer that
         reads the count there. Then ``read_counters`` (waits), ``grow`` (True: enqueue the frame
-        again) and ``result``.
+        again) and ``result``. ``cam_buf``: ``n_views`` (1..MAX_VIEWS) camera records; the
+        counters count each patch once, whatever the number of views that see it.
 
         Only the steps the previous stage needed plus one are enqueued (a view changes little
         between frames, and each step is a launch of Python and device time); if the last of them
         still splits patches, ``grow`` asks for the stage again with all ``max_steps`` steps. Only
         step ``max_steps`` forces its patches out, so nothing is rendered too coarse meanwhile."""
         settings.validate()
+        _check_views(n_views, cam_buf)
         q = cl_device().queue
         src_domains, grid_for, n_init = self._init_for
         if src_domains is not domains or grid_for != tuple(settings.initial_grid):
@@ -148,15 +176,17 @@ class LodStage:
         steps_n = self._steps_n = max_steps if depth is None else min(max_steps, depth + 1)
         cap = min(b.capacity for b in self.bufs)
         # the buffers themselves, not their ids: held here, they cannot be freed and their ids reused
-        bound = (*inst, cam_buf, float(tu), float(tv), max_steps, cap,
+        bound = (*inst, cam_buf, int(n_views), float(tu), float(tv), max_steps, cap,
                  *(b.buf for b in (self.init, *self.bufs, self.render)))
-        if bound != self._bound:
-            for step, k in enumerate(self._step_kernels[:max_steps], start=1):
+        layout, kernels = self._kernels(n_views)
+        if bound != self._bound.get(layout):
+            for step, k in enumerate(kernels[:max_steps], start=1):
                 src = self.init if step == 1 else self.bufs[(step - 1) % 2]
                 k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf,
-                           np.uint32(self.render.capacity), self.counters, *inst, cam_buf, tu, tv,
+                           np.uint32(self.render.capacity), self.counters, *inst, cam_buf,
+                           np.uint32(n_views), tu, tv,
                            np.uint32(step), np.uint32(step == max_steps))
-            self._bound = bound
+            self._bound[layout] = bound
         if self._start_n != n_init:
             start = np.zeros((16, LOD_COUNTERS), np.uint32)
             start[0, C_CHILDREN] = n_init
@@ -164,8 +194,20 @@ class LodStage:
             self._start_n = n_init
         # device-to-device: a write from host memory would make NVIDIA's driver wait here
         cl.enqueue_copy(q, self.counters, self._start)
-        grid = (min(self.max_groups, max(cap, 1)) * LOD_LOCAL,)
-        self.events = [launch(q, k, grid, (LOD_LOCAL,)) for k in self._step_kernels[:steps_n]]
+        group = layout[0]
+        # as many work-items as with LOD_LOCAL a group: empty groups cost launch time too
+        grid = (min(max(1, self.max_groups * LOD_LOCAL // group), max(cap, 1)) * group,)
+        self.events = [launch(q, k, grid, (group,)) for k in kernels[:steps_n]]
+
+    def _kernels(self, n_views: int):
+        """(layout, the step kernels) for ``n_views`` views, built on first use."""
+        layout = lod_layout(n_views, self._max_group)
+        if layout not in self._step_kernels:
+            group, slots = layout
+            prog = build(["lod/lod.cl"], self._functions,
+                         defines={"LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots})
+            self._step_kernels[layout] = [cl.Kernel(prog, "lod_step") for _ in range(15)]
+        return layout, self._step_kernels[layout]
 
     def read_counters(self, wait: bool = True):
         """Read the enqueued stage's counters back: waiting for them, or (``wait=False``) enqueued
@@ -229,6 +271,16 @@ class LodStage:
         if n:
             cl.enqueue_copy(cl_device().queue, out, self.render.buf)
         return out
+
+
+def _check_views(n_views, cam_buf) -> None:
+    """SceneError unless ``n_views`` is a whole number in 1..MAX_VIEWS that ``cam_buf`` holds
+    records for (the kernel reads n_views records from it)."""
+    if isinstance(n_views, bool) or not isinstance(n_views, (int, np.integer)) or not 1 <= n_views <= MAX_VIEWS:
+        raise SceneError(f"the LOD stage takes 1..{MAX_VIEWS} views, got n_views={n_views!r}")
+    held = cam_buf.size // (CAMERA.length * 4)
+    if held < n_views:
+        raise SceneError(f"the LOD stage's camera buffer holds {held} camera records, fewer than n_views={n_views}")
 
 
 def check_budget(made: int, settings: LodSettings) -> None:

@@ -5,8 +5,8 @@ and counts the same counters exactly. Tests compare the two (tests/meshlod/test_
 Also the host's half of the cut, shared with the driver: ``cut_camera`` turns a camera and a
 threshold into the small float32 record the kernel reads (derived once per frame in float64).
 
-The rule, per instance i and cluster c of its mesh (threshold T pixels):
-  draw(c, i) = proj(error, lod_sphere) <= T  and  (parent_error = +inf  or  proj(parent_error, parent_sphere) > T)
+The rule, per instance i and cluster c of its mesh (threshold T pixels), for one view:
+  draw(c, i) = not proj(error, lod_sphere) > T  and  (parent_error = +inf  or  proj(parent_error, parent_sphere) > T)
   proj(e, S) = 0 if e == 0, else (e * s_i) * K / w(dn)
   dn = max(depth(M_i * centre_S) - r_S * s_i, near),  w(d) = wa * d + wb
 with K = P[1][1] * H / 2, wa = -P[3][2], wb = P[3][3] (perspective: w = d; orthographic: w = 1)
@@ -20,16 +20,30 @@ culled iff cutoff < 1 and |d| > 0 and dot(d, axis) >= cutoff * |d|, d = apex * E
 with the eye homogeneous (E_w = 1 perspective, 0 orthographic: E is then the backward direction).
 Instances whose hand-off weight is 0 (paramlod.scene.handoff: their surfels draw every pixel) are
 skipped: no pair, no test counted.
+
+Several views (a multi-view frame, paramlod.core.views.Views; ``select_views``): "proj(e, S) > T"
+becomes ``exceeds``: proj_v(e, S) > T in some view v whose frustum S meets (S not wholly outside
+one of v's planes, the test above on the LOD sphere), or, when S is outside every view, in every
+view. That is the largest projected error over the views that see S, or the smallest over all
+when none does: a function of (e, S) alone, so the cut stays a cut, and monotone from leaf to
+root (a parent's sphere holds its children's: it meets every view they meet, and the smallest
+over all views is at most any one view's), so exactly one cluster of each path is drawn, as fine
+as the finest any view that sees its group asks for. A drawn cluster is dropped only when every
+view culls it (frustum, or backface cone; counted as frustum-culled when every view's frustum
+test culls it, else as backface-culled) and is drawn into the views that do not: its view mask,
+bit v. With one view this is the rule above exactly.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
+from paramlod.core.views import as_views
 from paramlod.errors import MeshError
 
 # the counters (8 ulong on the device; the rest are spare zeros)
 COUNTERS = ("selected", "triangles", "culled_frustum", "culled_backface", "tests")
+VIEW_COUNTERS = ("clusters", "triangles")   # per view of a multi-view cut, after the 8
 SIMILAR = 1   # MeshInstances flag (paramlod.meshlod.buffers.SIMILAR; checked equal in the tests)
 
 # the cut camera record (float32): offsets the kernel gets as -D defines (paramlod.meshlod.cut)
@@ -83,6 +97,12 @@ def cut_camera(camera, threshold_px) -> np.ndarray:
     return rec.astype(np.float32)
 
 
+def cut_cameras(camera, threshold_px) -> np.ndarray:
+    """The records of every view (float32 [N * CC_FLOATS], one after another) of a Camera (N = 1)
+    or a Views."""
+    return np.concatenate([cut_camera(c, threshold_px) for c in as_views(camera)])
+
+
 # --- the twin's float32 arithmetic, in the kernel's order ----------------------------------------
 def _point(m, p):
     """Rows 0-2 of row-major 4x4 matrices ``m`` [n, 16] applied to points ``p`` [c, 3]: [n, c, 3]."""
@@ -133,16 +153,37 @@ def _backface_culled(apex, cone, model, normal, cc):
     return (cutoff < 1) & (length > 0) & (dot >= cutoff * length)
 
 
+def exceeds(e, sphere, model, s, ccs, T):
+    """bool [n, c]: the multi-view projected error of errors ``e`` around spheres ``sphere`` (as
+    ``projected_error``) exceeds T, for the views of records ``ccs`` (a list of cut_camera records)."""
+    above = np.stack([projected_error(e, sphere, model, s, cc) > T for cc in ccs])
+    if len(ccs) == 1:
+        return above[0]
+    w = _point(model, sphere[:, :3])
+    seen = ~np.stack([planes_outside((w[..., 0], w[..., 1], w[..., 2]), sphere[None, :, 3] * s[:, None], cc)
+                      for cc in ccs])
+    return np.where(seen.any(axis=0), (seen & above).any(axis=0), above.all(axis=0))
+
+
 def select(arrays, instances, camera, threshold_px, cull_frustum=True, cull_backface=True, weights=None):
     """The cut of every batch of ``instances`` (paramlod.meshlod.buffers.MeshInstances) over the
     clusters of ``arrays`` (MeshArrays); ``weights``: the instances' hand-off weights (None: all 1).
     Returns (pairs uint32 [n, 2] of (instance, cluster), sorted by instance then cluster;
     counters {name: int} with the names of COUNTERS)."""
-    cc = cut_camera(camera, threshold_px)
+    pairs, _, counts = select_views(arrays, instances, camera, threshold_px, cull_frustum, cull_backface, weights)
+    counts.pop("views")
+    return pairs, counts
+
+
+def select_views(arrays, instances, cameras, threshold_px, cull_frustum=True, cull_backface=True, weights=None):
+    """``select`` for the views of ``cameras`` (a Camera or a paramlod.core.views.Views): (pairs,
+    view masks uint64 [n] (bit v: drawn into view v), counters: COUNTERS and "views", per view
+    {"clusters", "triangles"} drawn into it)."""
+    ccs = [cut_camera(c, threshold_px) for c in as_views(cameras)]
     live_all = np.ones(len(instances.inst_f), bool) if weights is None else np.asarray(weights, _F) > 0
-    T = cc[CC_T]
+    T = ccs[0][CC_T]
     counts = dict.fromkeys(COUNTERS, 0)
-    pairs = []
+    pairs, masks = [], []
     f_model = INSTANCE_F.slice("model")
     f_normal = INSTANCE_F.slice("normal")
     u_flags = INSTANCE_U.offset("flags")
@@ -156,21 +197,38 @@ def select(arrays, instances, camera, threshold_px, cull_frustum=True, cull_back
         s = np.asarray(instances.scales[i0:i0 + ni], _F)
         live = live_all[i0:i0 + ni]
         counts["tests"] += int(live.sum()) * nc
-        own = projected_error(cl["error"], cl["lod_sphere"], model, s, cc) <= T
-        par = np.isinf(cl["parent_error"])[None, :] | (projected_error(cl["parent_error"], cl["parent_sphere"], model, s, cc) > T)
+        own = ~exceeds(cl["error"], cl["lod_sphere"], model, s, ccs, T)
+        par = np.isinf(cl["parent_error"])[None, :] | exceeds(cl["parent_error"], cl["parent_sphere"], model, s, ccs, T)
         draw = own & par & live[:, None]
-        if cull_frustum:
-            fr = draw & _frustum_culled(cl["sphere"], model, s, cc)
-            counts["culled_frustum"] += int(fr.sum())
-            draw &= ~fr
-        if cull_backface:
-            similar = (instances.inst_u[i0:i0 + ni, u_flags] & SIMILAR) != 0
-            bf = draw & similar[:, None] & _backface_culled(cl["cone_apex"], cl["cone"], model, normal, cc)
-            counts["culled_backface"] += int(bf.sum())
-            draw &= ~bf
+        similar = (instances.inst_u[i0:i0 + ni, u_flags] & SIMILAR) != 0
+        mask = np.zeros(draw.shape, np.uint64)
+        all_outside = np.ones(draw.shape, bool)
+        for v, cc in enumerate(ccs):
+            outside = _frustum_culled(cl["sphere"], model, s, cc) if cull_frustum else np.zeros(draw.shape, bool)
+            back = ~outside & similar[:, None] & _backface_culled(cl["cone_apex"], cl["cone"], model, normal, cc) \
+                if cull_backface else np.zeros(draw.shape, bool)
+            mask |= np.where(~outside & ~back, np.uint64(1 << v), np.uint64(0))
+            all_outside &= outside
+        dropped = draw & (mask == 0)
+        counts["culled_frustum"] += int((dropped & all_outside).sum())
+        counts["culled_backface"] += int((dropped & ~all_outside).sum())
+        draw &= ~dropped
         ii, cc_ = np.nonzero(draw)
         counts["selected"] += len(ii)
         counts["triangles"] += int(cl["count"][cc_].astype(np.int64).sum())
         pairs.append(np.stack([ii + i0, cc_ + c0], axis=1).astype(np.uint32))
+        masks.append(mask[ii, cc_])
+    return sort_views(pairs, masks, counts, len(ccs), arrays.clusters["count"])
+
+
+def sort_views(pairs, masks, counts, n_views, cluster_counts):
+    """(pairs, masks, counts) of a cut (lists of per-batch pairs and masks), sorted by instance
+    then cluster, with counts["views"] made from the masks (also the skinned cull's twin's)."""
     out = np.concatenate(pairs) if pairs else np.zeros((0, 2), np.uint32)
-    return out[np.lexsort((out[:, 1], out[:, 0]))], counts
+    m = np.concatenate(masks) if masks else np.zeros(0, np.uint64)
+    order = np.lexsort((out[:, 1], out[:, 0]))
+    out, m = out[order], m[order]
+    tris = np.asarray(cluster_counts, np.int64)[out[:, 1]]
+    counts["views"] = [{"clusters": int(on.sum()), "triangles": int(tris[on].sum())}
+                       for on in (((m >> np.uint64(v)) & np.uint64(1)) != 0 for v in range(n_views))]
+    return out, m, counts

@@ -22,6 +22,15 @@ of MAX_OBJECT_IDS floats): a hand-off mesh is one instance of its own object, so
 instance; the fragment stage keeps the pixels whose dither is below the weight, on the target's
 own grid (subsamples with SSAA). The pixels complement the surfels' exactly when the surfels' key
 buffers have that grid too (noAA or MSAA with points supersample 1; 4xSS on both).
+
+Multi-view frames (``MeshDraw.draw_views``): the same indirect draw of the one selection, with the
+cut's view masks as a second instanced attribute, is amplified at the latest stage: the vertex
+stage works in world space (kernels/meshlod/mesh_views_vertex.glsl) and an instanced geometry
+stage (mesh_views_geometry.glsl, VIEWS_PER_DRAW invocations, one draw per chunk of that many views)
+projects each triangle into view ``base + gl_InvocationID``, skips the views the mask leaves out
+and those whose frustum it misses, and sets ``gl_Layer``; the targets are layered (a layer per
+view, paramlod.renderers.gl_targets.LayeredGLTargets) and resolved and read back layer by layer
+into one Frame per view. One view is ``draw``, with its programs unchanged.
 """
 from __future__ import annotations
 
@@ -36,30 +45,43 @@ from paramlod import kernels
 from paramlod.core.camera import Camera
 from paramlod.core.frame import Frame, FrameStats
 from paramlod.core.layouts import INSTANCE_U, glsl_prelude
+from paramlod.core.views import MAX_VIEWS, Views
 from paramlod.device.context import gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import DeviceError, MeshError
 from paramlod.meshlod.buffers import MeshArrays, MeshInstances
-from paramlod.renderers.gl_targets import GLTargets, GrowBuffer, effective_aa, gl_matrix, targets_for
+from paramlod.renderers.gl_targets import GLTargets, GrowBuffer, LayeredGLTargets, effective_aa, gl_matrix, targets_for
 from paramlod.renderers.shading import LIGHT
 
 COLOR_BY = {0: "material", 1: "cluster", 2: "level"}
 MAX_OBJECT_IDS = 4096   # object ids are 12 bits (paramlod.scene.scene.MAX_OBJECTS + 1)
 COMMAND_DTYPE = np.dtype([("count", np.uint32), ("instances", np.uint32), ("first", np.uint32),
                           ("base_vertex", np.int32), ("base_instance", np.uint32)])   # DrawElementsIndirectCommand
+# views per draw of a multi-view frame: the geometry stage's invocations (GL allows 32), more views
+# taking a draw per chunk of this many. On an H200 (1080p, 48 views of 0.5 M triangles) 16 per draw
+# drew in 200 ms, 8 in 207, 4 in 213 and 32 in 309
+VIEWS_PER_DRAW = 16
+VIEW_RECORD = 2 * 16 * 4   # std140 PlView (kernels/meshlod/mesh_common.glsl): view, proj matrices
 
 
-def _program(ctx, color_by: int):
-    """The draw program for debug colouring ``color_by``, cached with the GL context."""
+def _program(ctx, color_by: int, views_per_draw: int = 0):
+    """The draw program for debug colouring ``color_by`` (and ``views_per_draw`` geometry-stage
+    invocations for a multi-view draw; 0: the one-view program), cached with the GL context."""
     programs = gl_cache(ctx).setdefault("meshlod_draw_programs", {})
-    prog = programs.get(color_by)
+    key = color_by if not views_per_draw else (color_by, views_per_draw)
+    prog = programs.get(key)
     if prog is None:
         head = f"#version 450 core\n#define PL_COLOR_BY {color_by}\n"
+        if views_per_draw:
+            head += f"#define PL_VIEWS 1\n#define PL_VIEWS_PER_DRAW {views_per_draw}\n#define PL_MAX_VIEWS {MAX_VIEWS}\n"
         common = [glsl_prelude(), kernels.source("meshlod/mesh_common.glsl")]
         # the debug colours are snippet dialect: the dialect first, then them, then the stage
         debug = [kernels.source("common/dialect.glsl"), kernels.source("common/debug_color.cl")] if color_by else []
-        stages = {"vertex_shader": head + "\n".join([*common, kernels.source("meshlod/mesh_vertex.glsl")]),
+        vertex = "meshlod/mesh_views_vertex.glsl" if views_per_draw else "meshlod/mesh_vertex.glsl"
+        stages = {"vertex_shader": head + "\n".join([*common, kernels.source(vertex)]),
                   "fragment_shader": head + "\n".join([*common, *debug, kernels.source("meshlod/mesh_fragment.glsl")])}
+        if views_per_draw:
+            stages["geometry_shader"] = head + "\n".join([*common, kernels.source("meshlod/mesh_views_geometry.glsl")])
         try:
             prog = ctx.program(**stages)
         except moderngl.Error as exc:
@@ -68,7 +90,7 @@ def _program(ctx, color_by: int):
             raise DeviceError(f"the mesh draw's shaders do not compile on {ctx.info.get('GL_RENDERER')} "
                               f"({stage}):\n{context_lines(stages[stage], log, GLSL_LINE)}\n"
                               f"compiler said:\n{log[-2000:]}") from None
-        programs[color_by] = prog
+        programs[key] = prog
     return prog
 
 
@@ -80,8 +102,11 @@ class MeshDraw:
         self.arrays: MeshArrays | None = None
         self.instances: MeshInstances | None = None
         self._targets: GLTargets | None = None
+        self._layered: LayeredGLTargets | None = None
         self._picks = GrowBuffer(self.ctx, 1024)
         self._commands = GrowBuffer(self.ctx, 1024)
+        self._masks = GrowBuffer(self.ctx, 1024)   # the view masks of a multi-view draw
+        self._views = self.ctx.buffer(reserve=MAX_VIEWS * VIEW_RECORD)   # its PlViews block
         self._weights_host = np.ones(MAX_OBJECT_IDS, np.float32)
         self._weights = self.ctx.buffer(self._weights_host.tobytes())
         self._static: list = []
@@ -149,23 +174,27 @@ class MeshDraw:
     def release(self):
         """Give back every GL object (the draw cannot be used afterwards)."""
         self._release_static()
-        for b in (self._picks, self._commands):
+        for b in (self._picks, self._commands, self._masks):
             b.buf.release()
         self._weights.release()
-        if self._targets is not None:
-            self._targets.release()
-            self._targets = None
+        self._views.release()
+        for name in ("_targets", "_layered"):
+            if getattr(self, name) is not None:
+                getattr(self, name).release()
+                setattr(self, name, None)
 
-    def _vao(self, prog):
-        key = (id(prog), self._picks.generation)
+    def _vao(self, prog, views: bool = False):
+        key = (id(prog), self._picks.generation, self._masks.generation if views else -1)
         vao = self._vaos.get(key)
         if vao is None:
             for k in [k for k in self._vaos if k[0] == id(prog)]:   # made for a released pick buffer
                 self._vaos.pop(k).release()
-            vao = self._vaos[key] = self.ctx.vertex_array(
-                prog, [(self._vertices, "4f", "in_position"), (self._normals, "4f", "in_normal"),
-                       (self._picks.buf, "2u/i", "in_pick")],
-                index_buffer=self._indices, index_element_size=4)
+            attributes = [(self._vertices, "4f", "in_position"), (self._normals, "4f", "in_normal"),
+                          (self._picks.buf, "2u/i", "in_pick")]
+            if views:   # the pair's ulong view mask as two uints
+                attributes.append((self._masks.buf, "2u/i", "in_views"))
+            vao = self._vaos[key] = self.ctx.vertex_array(prog, attributes, index_buffer=self._indices,
+                                                          index_element_size=4)
         return vao
 
     # --- a frame ----------------------------------------------------------------------------
@@ -226,26 +255,18 @@ class MeshDraw:
             raise MeshError(f"background must be linear RGB (r, g, b), got {background!r}")
         return sel, light, background
 
-    def draw(self, selection: np.ndarray, camera: Camera, aa: str | None = None, color_by: int = 0,
-             light=None, background=(0.0, 0.0, 0.0), weights=None) -> Frame:
-        """Draw the (instance, cluster) pairs of ``selection`` (uint32 [n, 2], the cut's output)
-        seen by ``camera`` with anti-aliasing ``aa`` (paramlod.renderers.aa.parse_aa; None =
-        noAA); ``color_by`` 0/1/2 colours by material, cluster or LOD level; ``light`` is the
-        light record (default paramlod.renderers.shading.LIGHT); ``weights``: the instances'
-        hand-off weights (MeshInstances.weights; None: all 1). Returns a host Frame."""
+    def _begin(self, selection, camera, aa, color_by, light, background, weights):
+        """What every frame does first: check the input and the AA mode. (sel, light, background,
+        the weight of each object id, (requested, effective, notes) AA)."""
         sel, light, background = self._check(selection, camera, color_by, light, background)
         table = self._object_weights(weights)
         req, eff, notes = effective_aa(self.ctx, "noAA" if aa is None else aa)
         for msg in notes:
-            warnings.warn(msg, RuntimeWarning, stacklevel=2)
-        ctx = self.ctx
-        t0 = time.perf_counter()
-        prog = _program(ctx, int(color_by))
-        w, h = camera.size
-        tg, self._targets = self._targets, None   # not kept when making new ones fails
-        tg = self._targets = targets_for(tg, ctx, (w, h), eff.ss, eff.msaa, "mesh draw")
-        t1 = time.perf_counter()
+            warnings.warn(msg, RuntimeWarning, stacklevel=3)
+        return sel, light, background, table, (req, eff, notes)
 
+    def _upload(self, sel, table) -> np.ndarray:
+        """Write the frame's draw commands, picks and object weights; returns the commands."""
         n = len(sel)
         cmd = np.zeros(n, COMMAND_DTYPE)
         cmd["count"] = self._index_count[sel[:, 1]]
@@ -257,36 +278,28 @@ class MeshDraw:
         if not np.array_equal(table, self._weights_host):
             self._weights.write(table.tobytes())
             self._weights_host = table
-        t2 = time.perf_counter()
+        return cmd
 
-        set_uniform(prog, "u_view", gl_matrix(camera.view))
-        set_uniform(prog, "u_proj", gl_matrix(camera.projection))
+    def _bind(self, prog, light, rows: int):
+        """The uniforms and storage buffers the draw programs share; depth test on, two-sided."""
+        ctx = self.ctx
         set_uniform(prog, "u_light", light)
-        set_uniform(prog, "u_rows", int(h * eff.ss))
+        set_uniform(prog, "u_rows", rows)
         for binding, b in enumerate((self._inst_f, self._inst_u, self._materials, self._clusters, self._weights)):
             b.bind_to_storage_buffer(binding)
-        tg.begin()
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)   # two-sided
-        triangles = 0
-        if n:
-            query = ctx.query(primitives=True)
-            with query:
-                self._vao(prog).render_indirect(self._commands.buf, mode=moderngl.TRIANGLES, count=n)
-            triangles = int(query.primitives)
-        ctx.finish()
-        t3 = time.perf_counter()
-        device_samples = tg.resolve()
-        t4 = time.perf_counter()
-        color, depth, normal, ids = tg.read()
-        t5 = time.perf_counter()
+
+    def _stats(self, size, aa, color_by, cmd, triangles, depth, device_samples, ms) -> dict:
+        req, eff, notes = aa
         if device_samples != eff.msaa:
-            notes.append(f"the device allocated {device_samples} samples per pixel for a {eff.msaa}-sample "
-                         "request; coverage and the depth/id resolve use all of them")
-        stats = FrameStats({
-            "device": ctx.info.get("GL_RENDERER"),
+            notes = notes + [f"the device allocated {device_samples} samples per pixel for a {eff.msaa}-sample "
+                             "request; coverage and the depth/id resolve use all of them"]
+        n = len(cmd)
+        return {
+            "device": self.ctx.info.get("GL_RENDERER"),
             "variant": "meshlets-gl",
-            "size": [w, h],
+            "size": list(size),
             "aa": req.name,
             "aa_effective": eff.name,
             "msaa_requested": req.msaa,
@@ -303,8 +316,111 @@ class MeshDraw:
             "draw_commands": n,
             "pixels_written": int(np.count_nonzero(np.isfinite(depth))),
             "warnings": list(notes),
-            "ms": {"setup": (t1 - t0) * 1e3, "upload": (t2 - t1) * 1e3, "render": (t3 - t2) * 1e3,
-                   "draw": (t3 - t2) * 1e3, "resolve": (t4 - t3) * 1e3, "readback": (t5 - t4) * 1e3,
-                   "frame": (t4 - t0) * 1e3, "total": (t5 - t0) * 1e3},
-        })
+            "ms": ms,
+        }
+
+    def draw(self, selection: np.ndarray, camera: Camera, aa: str | None = None, color_by: int = 0,
+             light=None, background=(0.0, 0.0, 0.0), weights=None) -> Frame:
+        """Draw the (instance, cluster) pairs of ``selection`` (uint32 [n, 2], the cut's output)
+        seen by ``camera`` with anti-aliasing ``aa`` (paramlod.renderers.aa.parse_aa; None =
+        noAA); ``color_by`` 0/1/2 colours by material, cluster or LOD level; ``light`` is the
+        light record (default paramlod.renderers.shading.LIGHT); ``weights``: the instances'
+        hand-off weights (MeshInstances.weights; None: all 1). Returns a host Frame."""
+        sel, light, background, table, aa_ = self._begin(selection, camera, aa, color_by, light, background, weights)
+        eff = aa_[1]
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        prog = _program(ctx, int(color_by))
+        w, h = camera.size
+        tg, self._targets = self._targets, None   # not kept when making new ones fails
+        tg = self._targets = targets_for(tg, ctx, (w, h), eff.ss, eff.msaa, "mesh draw")
+        t1 = time.perf_counter()
+        cmd = self._upload(sel, table)
+        t2 = time.perf_counter()
+
+        set_uniform(prog, "u_view", gl_matrix(camera.view))
+        set_uniform(prog, "u_proj", gl_matrix(camera.projection))
+        self._bind(prog, light, int(h * eff.ss))
+        tg.begin()
+        n = len(sel)
+        triangles = 0
+        if n:
+            query = ctx.query(primitives=True)
+            with query:
+                self._vao(prog).render_indirect(self._commands.buf, mode=moderngl.TRIANGLES, count=n)
+            triangles = int(query.primitives)
+        ctx.finish()
+        t3 = time.perf_counter()
+        device_samples = tg.resolve()
+        t4 = time.perf_counter()
+        color, depth, normal, ids = tg.read()
+        t5 = time.perf_counter()
+        ms = {"setup": (t1 - t0) * 1e3, "upload": (t2 - t1) * 1e3, "render": (t3 - t2) * 1e3,
+              "draw": (t3 - t2) * 1e3, "resolve": (t4 - t3) * 1e3, "readback": (t5 - t4) * 1e3,
+              "frame": (t4 - t0) * 1e3, "total": (t5 - t0) * 1e3}
+        stats = FrameStats(self._stats((w, h), aa_, color_by, cmd, triangles, depth, device_samples, ms))
         return Frame(color=color, depth=depth, normal=normal, object_id=ids, stats=stats, background=background)
+
+    def draw_views(self, selection: np.ndarray, masks: np.ndarray, views: Views, aa: str | None = None,
+                   color_by: int = 0, light=None, background=(0.0, 0.0, 0.0), weights=None) -> list[Frame]:
+        """``draw`` for every view of ``views`` (a paramlod.core.views.Views) from one selection:
+        ``masks`` (uint64 per pair, the cut's view masks: bit v draws the pair into view v;
+        Selection.read_masks). Returns one host Frame per view; its stats are the whole draw's
+        (``triangles``: emitted into all views; ``ms`` setup, upload, draw) but for
+        ``pixels_written`` and the times of its own resolve and read-back."""
+        if not isinstance(views, Views):
+            raise MeshError(f"MeshDraw.draw_views needs a paramlod.core.views.Views, got {type(views).__name__}")
+        sel, light, background, table, aa_ = self._begin(selection, views[0], aa, color_by, light, background, weights)
+        m = np.asarray(masks)
+        if m.shape != (len(sel),) or not np.issubdtype(m.dtype, np.unsignedinteger):
+            raise MeshError(f"MeshDraw.draw_views: masks must be one unsigned view mask per selected pair "
+                            f"({len(sel)}), got {m.dtype} of shape {m.shape}")
+        eff = aa_[1]
+        ctx = self.ctx
+        n_views = len(views)
+        per_draw = min(n_views, VIEWS_PER_DRAW)
+        t0 = time.perf_counter()
+        prog = _program(ctx, int(color_by), per_draw)
+        w, h = views.size
+        tg, self._layered = self._layered, None   # not kept when making new ones fails
+        tg = self._layered = targets_for(tg, ctx, (w, h), eff.ss, eff.msaa, "multi-view mesh draw", layers=n_views)
+        t1 = time.perf_counter()
+        cmd = self._upload(sel, table)
+        self._masks.write(np.ascontiguousarray(m, np.uint64).tobytes())
+        records = np.zeros((MAX_VIEWS, 2, 4, 4), np.float32)
+        for v, cam in enumerate(views):
+            records[v] = gl_matrix(cam.view), gl_matrix(cam.projection)
+        self._views.write(records.tobytes())
+        t2 = time.perf_counter()
+
+        self._bind(prog, light, int(h * eff.ss))
+        set_uniform(prog, "u_n_views", n_views)
+        self._views.bind_to_uniform_block(0)
+        tg.begin()
+        n = len(sel)
+        triangles = 0
+        if n:
+            query = ctx.query(primitives=True)
+            vao = self._vao(prog, views=True)
+            with query:
+                for base in range(0, n_views, per_draw):
+                    set_uniform(prog, "u_base", base)
+                    vao.render_indirect(self._commands.buf, mode=moderngl.TRIANGLES, count=n)
+            triangles = int(query.primitives)
+        ctx.finish()
+        t3 = time.perf_counter()
+        frames = []
+        for v in range(n_views):
+            t4 = time.perf_counter()
+            tg.resolve(v)
+            device_samples = tg.device_samples()   # waits for the resolve
+            t5 = time.perf_counter()
+            color, depth, normal, ids = tg.read()
+            t6 = time.perf_counter()
+            ms = {"setup": (t1 - t0) * 1e3, "upload": (t2 - t1) * 1e3, "render": (t3 - t2) * 1e3,
+                  "draw": (t3 - t2) * 1e3, "resolve": (t5 - t4) * 1e3, "readback": (t6 - t5) * 1e3,
+                  "frame": (t3 - t0 + t5 - t4) * 1e3, "total": (t6 - t0) * 1e3}
+            stats = FrameStats(self._stats((w, h), aa_, color_by, cmd, triangles, depth, device_samples, ms))
+            frames.append(Frame(color=color, depth=depth, normal=normal, object_id=ids, stats=stats,
+                                background=background))
+        return frames

@@ -8,6 +8,10 @@ same enqueue: ``enqueue`` reads the cut's selection count on the device (no wait
 enqueues the copy of the counters, and after the frame's one wait ``grow`` says whether the
 large-triangle list overflowed (it has grown; draw the frame again) and ``stats`` reads the
 counters. numpy twin: paramlod.meshlod.raster_reference (the same keys, bit for bit).
+
+A multi-view frame gives a paramlod.core.views.Views, a KeyBuffer of as many layers and the cut's
+view masks (paramlod.meshlod.cut.Selection.masks): each cluster is drawn into the layers of the
+views its mask names, with that view's clipping and triangle setup.
 """
 from __future__ import annotations
 
@@ -15,9 +19,11 @@ import numpy as np
 import pyopencl as cl
 
 from paramlod.core.layouts import CAMERA, CAMERA_FLOATS, CLUSTER, camera_record
+from paramlod.core.views import Views
 from paramlod.device.context import cl_device
 from paramlod.device.programs import build, launch
 from paramlod.errors import MeshError
+from paramlod.meshlod.cut import MASK_BYTES, DeviceRecords
 from paramlod.meshlod.raster_reference import GUARD_PIXELS, SUBPIXEL_BITS
 from paramlod.renderers.shading import LIGHT
 
@@ -61,68 +67,75 @@ class MeshRaster:
         self.counters = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 8 * 8)
         self._counts = np.zeros(8, np.uint64)
         self.large = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 16 * self.large_capacity)
-        self._cam_buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY, CAMERA_FLOATS * 4)
-        self._light_buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY, 16)
-        self._host = None     # the camera and light records being uploaded (kept until the next frame)
+        self._cams, self._light = DeviceRecords(), DeviceRecords()   # written each frame, no wait
         self.events = ()
 
-    def _camera(self, camera, keys):
-        """The camera record's device buffer (uploaded from a Camera or a record)."""
+    def _camera(self, camera, keys) -> cl.Buffer:
+        """The device buffer of the camera records, one per layer of ``keys`` (uploaded from a
+        Camera, a Views or records)."""
         if isinstance(camera, cl.Buffer):
-            return camera, None
-        rec = camera_record(camera) if hasattr(camera, "view") else np.asarray(camera, np.float32)
-        if rec.shape != (CAMERA_FLOATS,):
-            raise MeshError(f"MeshRaster: a camera record has {CAMERA_FLOATS} floats "
-                            f"(paramlod.core.layouts.camera_record), got shape {rec.shape}")
-        size = (int(rec[CAMERA.offset("w")]), int(rec[CAMERA.offset("h")]))
-        if size != (keys.width, keys.height):
-            raise MeshError(f"MeshRaster: the camera is {size[0]}x{size[1]} but the key buffer is "
+            return camera
+        if isinstance(camera, Views):
+            rec = camera.records()
+        else:
+            rec = camera_record(camera) if hasattr(camera, "view") else np.asarray(camera, np.float32).reshape(-1)
+        if rec.size % CAMERA_FLOATS or rec.size // CAMERA_FLOATS != keys.layers:
+            raise MeshError(f"MeshRaster: the key buffer has {keys.layers} layer(s): it takes as many camera records "
+                            f"of {CAMERA_FLOATS} floats (paramlod.core.layouts.camera_record), got {rec.size} floats")
+        per_view = rec.reshape(keys.layers, CAMERA_FLOATS)
+        sizes = {(int(r[CAMERA.offset("w")]), int(r[CAMERA.offset("h")])) for r in per_view}
+        if sizes != {(keys.width, keys.height)}:
+            got = ", ".join(f"{w}x{h}" for w, h in sorted(sizes))
+            raise MeshError(f"MeshRaster: the camera is {got} but the key buffer is "
                             f"{keys.width}x{keys.height}; draw with a camera of the key buffer's size "
                             "(camera.with_size)")
-        return self._cam_buf, np.ascontiguousarray(rec, np.float32)
+        return self._cams.write(rec)
 
     def enqueue(self, keys, camera, dev, selection, capacity: int, cut_counters, light=None,
-                color_by: int = 0) -> list:
+                color_by: int = 0, masks: cl.Buffer | None = None) -> list:
         """Enqueue the raster of the selection (no wait); returns the kernels' events.
 
         ``keys``: the KeyBuffer; ``camera``: a Camera, its record or a device buffer holding it
-        (then of the keys' size); ``dev``: the scene's DeviceMeshes; ``selection``: device buffer
+        (then of the keys' size), or for a KeyBuffer of N layers a Views of N cameras (or N
+        records one after another); ``dev``: the scene's DeviceMeshes; ``selection``: device buffer
         of uint2 (instance, cluster) pairs with room for ``capacity``; ``cut_counters``: the cut's
         ulong counters, [0] the selected count (read on the device, at most ``capacity`` drawn);
         ``light``: the light record (paramlod.renderers.shading.LIGHT) or a buffer holding it;
-        ``color_by``: 0 material, 1 a colour per cluster, 2 per LOD level (or those names).
-        Each instance draws the share of its pixels that ``dev.weights`` gives it (the hand-off
-        dither; DeviceMeshes.set_weights, all 1 by default)."""
+        ``color_by``: 0 material, 1 a colour per cluster, 2 per LOD level (or those names);
+        ``masks``: with several layers, the pairs' view masks (a ulong each, bit v: drawn into
+        layer v; Selection.masks of a multi-view cut). Each instance draws the share of its
+        pixels that ``dev.weights`` gives it (the hand-off dither; DeviceMeshes.set_weights, all 1
+        by default)."""
         color_by = COLOR_BY.get(color_by, color_by)
         if color_by not in (0, 1, 2):
             raise MeshError(f"color_by must be 0 / 'material', 1 / 'cluster' or 2 / 'level', got {color_by!r}")
         q = cl_device().queue
-        cam_buf, cam_host = self._camera(camera, keys)
+        capacity = max(int(capacity), 0)
+        n_views = keys.layers
+        if n_views > 1 and (not isinstance(masks, cl.Buffer) or masks.size < capacity * MASK_BYTES):
+            raise MeshError(f"MeshRaster: a key buffer of {n_views} layers needs the cut's view masks, a device buffer "
+                            f"of {MASK_BYTES} bytes per pair (Selection.masks)")
+        cam_buf = self._camera(camera, keys)
         if isinstance(light, cl.Buffer):
-            light_buf, light_host = light, None
+            light_buf = light
         else:
             light_host = np.ascontiguousarray(LIGHT if light is None else light, np.float32)
             if light_host.shape != (4,):
                 raise MeshError(f"MeshRaster: the light record has 4 floats (towards the light, ambient), "
                                 f"got shape {light_host.shape}")
-            light_buf = self._light_buf
-        if cam_host is not None:
-            cl.enqueue_copy(q, cam_buf, cam_host, is_blocking=False)
-        if light_host is not None:
-            cl.enqueue_copy(q, light_buf, light_host, is_blocking=False)
-        self._host = (cam_host, light_host)
+            light_buf = self._light.write(light_host)
         cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * 8)
-        capacity = max(int(capacity), 0)
+        masks = selection if n_views == 1 else masks   # one view: not read
         geometry = (dev.vertices, dev.normals, dev.triangles, dev.clusters, dev.inst_f, dev.inst_u, dev.materials,
                     dev.weights)
-        args = (geometry, selection, capacity, cut_counters, cam_buf, light_buf, color_by, keys.color, keys.aux,
-                self.large, self.large_capacity, self.large_pixels)
+        args = (geometry, selection, masks, capacity, cut_counters, cam_buf, n_views, light_buf, color_by, keys.color,
+                keys.aux, self.large, self.large_capacity, self.large_pixels)
         # the same buffers and values frame after frame: converting the arguments each time costs
         # a measurable share of a small frame's Python time
         if args != self._bound:
-            self.k_clusters.set_args(*geometry, selection, np.uint32(capacity), cut_counters, cam_buf, light_buf,
-                                     np.uint32(color_by), np.uint32(self.large_pixels), keys.color, keys.aux,
-                                     self.large, np.uint32(self.large_capacity), self.counters)
+            self.k_clusters.set_args(*geometry, selection, masks, np.uint32(capacity), cut_counters, cam_buf,
+                                     np.uint32(n_views), light_buf, np.uint32(color_by), np.uint32(self.large_pixels),
+                                     keys.color, keys.aux, self.large, np.uint32(self.large_capacity), self.counters)
             self.k_large.set_args(*geometry, cam_buf, light_buf, np.uint32(color_by), keys.color, keys.aux,
                                   self.large, np.uint32(self.large_capacity), self.counters)
             self._bound = args

@@ -11,7 +11,8 @@ tests/meshlod/test_raster.py). The shading is keys.cl ``shade()`` (common/shadin
 colours kernels/common/debug_color.cl.
 
 The constants the kernel is built with live here (``SUBPIXEL_BITS``, ``GUARD_PIXELS``): the host
-passes them to the compiler. Used by tests/meshlod/test_raster.py; small frames only (one Python
+passes them to the compiler. Several views (``rasterize_views``): layer v holds the one-view raster
+of camera v over the pairs whose view mask has bit v, which is what the kernel computes per view. Used by tests/meshlod/test_raster.py; small frames only (one Python
 step per clipped triangle, vectorized over the pixels of the rest).
 """
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 from paramlod.core.color import srgb8_thresholds
 from paramlod.core.layouts import CAMERA, INSTANCE_F, INSTANCE_U, camera_record
+from paramlod.core.views import as_views
 from paramlod.renderers.shading import LIGHT
 from paramlod.core.debug_colors import cluster_color, level_color
 from paramlod.core.hashing import dither
@@ -304,4 +306,22 @@ def rasterize_detail(width, height, camera, arrays, instances, pairs, light=LIGH
         np.add.at(cov, pix, 1)
     counters["pixels"] = int(cov.sum())
     return {"color": ck.reshape(H, W), "aux": ak.reshape(H, W), "coverage": cov.reshape(H, W),
+            "counters": counters}
+
+
+def rasterize_views(width, height, cameras, arrays, instances, pairs, masks, light=LIGHT, color_by: int = 0,
+                    large_pixels: int | None = None, weights=None) -> dict:
+    """The multi-view raster: ``rasterize_detail`` of each view v of ``cameras`` (a Views or a
+    list of cameras) over the ``pairs`` whose view mask (``masks``, uint64 per pair) has bit v.
+    {"color", "aux" (uint64 [N, height, width], layer v = view v), "counters" summed over views}."""
+    views = as_views(cameras)
+    pairs = np.asarray(pairs, np.uint32).reshape(-1, 2)
+    masks = np.asarray(masks, np.uint64).reshape(-1)
+    if len(masks) != len(pairs):
+        raise ValueError(f"rasterize_views: {len(masks)} view masks for {len(pairs)} pairs")
+    layers = [rasterize_detail(width, height, cam, arrays, instances,
+                               pairs[((masks >> np.uint64(v)) & np.uint64(1)) != 0], light, color_by, large_pixels,
+                               weights) for v, cam in enumerate(views)]
+    counters = {k: sum(d["counters"][k] for d in layers) for k in layers[0]["counters"]}
+    return {"color": np.stack([d["color"] for d in layers]), "aux": np.stack([d["aux"] for d in layers]),
             "counters": counters}

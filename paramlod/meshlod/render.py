@@ -24,6 +24,15 @@ Meshes that take over from surfel objects (paramlod.scene.handoff) get their wei
 for the camera the surfels are splatted with (the keys pass's; for meshlets-gl, the frame's camera
 at settings.points.supersample, the surfels' pass), uploaded without a wait before the cut: the cut
 skips instances of weight 0, the raster and the GL fragment stage keep the pixels of dither < w.
+
+Multi-view frames (``paramlod.render_views``; both renderers are registered ``multiview=True``):
+the renderer is given a paramlod.core.views.Views. One cut serves every view (a cluster as fine as
+the finest view that sees it asks, culled only when every view culls it, paramlod.meshlod.cut);
+"meshlets" rasterizes each cluster into the layers of the views its mask names, "meshlets-gl"
+amplifies each triangle per view in a geometry stage into layered targets and returns one Frame
+per view. ``stats()["views"]`` (and each GL frame's ``view_counts``) counts the clusters and
+triangles drawn into each view. The hand-off weights of a multi-view frame are each instance's
+largest over the views (the mesh draws the share the view that needs it most asks for).
 """
 from __future__ import annotations
 
@@ -32,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from paramlod.core.views import Views
 from paramlod.device.context import cl_device
 from paramlod.device.programs import events_ms
 from paramlod.errors import MeshError
@@ -170,7 +180,7 @@ class Meshlets:
         self._cut = self.cuts.enqueue(self.dev, self.camera, s, self.selection)
         sel = self.selection
         self.raster.enqueue(target, self.camera, self.dev, sel.pairs, sel.capacity, sel.counters, LIGHT,
-                            COLOR_BY[s.color_by])
+                            COLOR_BY[s.color_by], masks=sel.masks)
 
     def collect(self):
         self.selection.collect()
@@ -180,7 +190,10 @@ class Meshlets:
         return any([self.selection.grow(), self.raster.grow()])
 
     def stats(self) -> dict:
-        return _mesh_stats(self.selection, self._cut, self.raster.stats(), self.dev, self.weights, self.cuts)
+        out = _mesh_stats(self.selection, self._cut, self.raster.stats(), self.dev, self.weights, self.cuts)
+        if isinstance(self.camera, Views):
+            out["views"] = _view_counts(self.selection)
+        return out
 
 
 class MeshletsGL:
@@ -216,10 +229,22 @@ class MeshletsGL:
             v, n = read_vertices(self.dev, slot.dst_first, slot.count)
             self.draw.write_vertices(slot.dst_first, v, n)
         pose_copy_ms = (time.perf_counter() - t0) * 1e3
-        pairs = self.selection.read_pairs(self.selection.counts()["selected"])   # the counters the loop collected
-        frame = self.draw.draw(pairs, camera, settings.tess.aa, COLOR_BY[s.color_by], LIGHT, self.background,
-                               weights=weights)
+        n = self.selection.counts()["selected"]   # the counters the loop collected
+        pairs = self.selection.read_pairs(n)
         stats = _mesh_stats(self.selection, events, {}, self.dev, weights, self.cuts)
+        if not isinstance(camera, Views):
+            frame = self.draw.draw(pairs, camera, settings.tess.aa, COLOR_BY[s.color_by], LIGHT, self.background,
+                                   weights=weights)
+            return self._frame_stats(frame, stats, pose_copy_ms)
+        frames = self.draw.draw_views(pairs, self.selection.read_masks(n), camera, settings.tess.aa,
+                                      COLOR_BY[s.color_by], LIGHT, self.background, weights=weights)
+        per_view = _view_counts(self.selection)
+        for v, frame in enumerate(frames):
+            self._frame_stats(frame, stats, pose_copy_ms)
+            frame.stats.update(view=v, views=len(frames), view_counts=per_view[v])
+        return frames
+
+    def _frame_stats(self, frame, stats, pose_copy_ms):
         ms = frame.stats["ms"]
         frame.stats.update({k: v for k, v in stats.items() if k != "ms"}, variant="meshlets-gl")
         frame.stats["ms"] = {**ms, "cut": stats["ms"]["cut"], "render": ms.get("draw", 0.0)}
@@ -238,13 +263,19 @@ class MeshletsGL:
 
 
 def _weights(dev, camera):
-    """The instances' hand-off weights for ``camera``, sent to the device (no wait); None when the
-    scene has no hand-off (the device's weights stay 1)."""
+    """The instances' hand-off weights for ``camera`` (a Views: each one's largest over the views),
+    sent to the device (no wait); None when the scene has no hand-off (the device's weights stay 1)."""
     if not dev.instances.handoffs:
         return None
-    w = dev.instances.weights(camera)
+    cams = camera if isinstance(camera, Views) else [camera]
+    w = np.max([dev.instances.weights(c) for c in cams], axis=0)
     dev.set_weights(w)
     return w
+
+
+def _view_counts(selection) -> list:
+    """Per view, {"clusters_drawn", "triangles_drawn"} of the last collected cut."""
+    return [{"clusters_drawn": c["clusters"], "triangles_drawn": c["triangles"]} for c in selection.view_counts()]
 
 
 def _mesh_stats(selection, cut_events, raster: dict, dev, weights, cuts) -> dict:
@@ -271,9 +302,10 @@ def _mesh_stats(selection, cut_events, raster: dict, dev, weights, cuts) -> dict
 register_kind(ObjectKind("mesh", "meshlets", "meshes",
                          follows={"tess": "meshlets-gl", "points": "meshlets", "points-ssaa": "meshlets"}))
 register_renderer(RendererSpec("meshlets", "mesh", Meshlets, "mesh", "keys", MeshSettings,
-                               "mesh clusters cut on the device and rasterized with atom_min into the key buffers"))
+                               "mesh clusters cut on the device and rasterized with atom_min into the key buffers",
+                               multiview=True))
 register_renderer(RendererSpec("meshlets-gl", "mesh", MeshletsGL, "mesh", "gl", MeshSettings,
                                "the same cut drawn by OpenGL (one indirect draw per cluster), MSAA/SSAA",
-                               takes_aa="all"))
+                               takes_aa="all", multiview=True))
 register_loader("mesh", load_mesh)
 register_loader("skinned", skinned_source)

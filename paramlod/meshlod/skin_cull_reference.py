@@ -24,14 +24,19 @@ M_i, largest scale s_i, the frame's float32 skin matrix J = J_p):
   the angle between n and d is at most 90 deg - alpha - asin(r s_r / |d|) (every normal in the cone
   sees every point of the sphere from behind), with a slack of 2^-12 |d| for the float32 eye transform.
 Instances whose hand-off weight is 0 select nothing and make no tests.
+Several views (``select_views``): a meshlet is dropped only when every view culls it (frustum, or
+backface for class 0; counted as frustum-culled when every view's frustum test culls it, else as
+backface-culled) and drawn into the views that do not (its view mask), as the static cut's rule
+(paramlod.meshlod.cut_reference); with one view this is the rule above.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from paramlod.core.layouts import INSTANCE_F
+from paramlod.core.views import as_views
 from paramlod.errors import MeshError
-from paramlod.meshlod.cut_reference import CC_EYE, COUNTERS, cut_camera, planes_outside
+from paramlod.meshlod.cut_reference import CC_EYE, COUNTERS, cut_camera, planes_outside, sort_views
 
 SLACK = 2.0 ** -12
 _F = np.float32
@@ -111,11 +116,19 @@ def select(bounds_list, slots, instances, skin, camera, cull_frustum=True, cull_
     (its batches say which instances draw which mesh); ``skin``: float32 [J, 4, 4] the frame's skin
     matrices of every slot, concatenated; ``weights``: hand-off weights (None: all 1).
     Returns (pairs uint32 [n, 2] of (instance, cluster) sorted, counters {name: int})."""
-    cc = cut_camera(camera, 0.0)
+    pairs, _, counts = select_views(bounds_list, slots, instances, skin, camera, cull_frustum, cull_backface, weights)
+    counts.pop("views")
+    return pairs, counts
+
+
+def select_views(bounds_list, slots, instances, skin, cameras, cull_frustum=True, cull_backface=True, weights=None):
+    """``select`` for the views of ``cameras`` (a Camera or a paramlod.core.views.Views): (pairs,
+    view masks uint64 [n], counters with "views": per view {"clusters", "triangles"})."""
+    ccs = [cut_camera(c, 0.0) for c in as_views(cameras)]
     skin = np.ascontiguousarray(skin, _F).reshape(-1, 16)
     live_all = np.ones(len(instances.inst_f), bool) if weights is None else np.asarray(weights, _F) > 0
     counts = dict.fromkeys(COUNTERS, 0)
-    pairs = []
+    pairs, masks, tris = [], [], {}
     f_model, f_normal = INSTANCE_F.slice("model"), INSTANCE_F.slice("normal")
     by_mesh = {}
     for mesh, i0, ni in instances.batches:
@@ -124,6 +137,7 @@ def select(bounds_list, slots, instances, skin, camera, cull_frustum=True, cull_
         sph, con, meta, srs, _ = records([b])
         sr = srs[0]
         nc = len(sph)
+        tris.update(zip(range(c0, c0 + nc), meta[:, 2].tolist()))
         for i0, ni in by_mesh.get(mesh, []):
             if nc == 0 or ni == 0:
                 continue
@@ -137,21 +151,26 @@ def select(bounds_list, slots, instances, skin, camera, cull_frustum=True, cull_
             cls = meta[None, :, 1]
             draw = np.broadcast_to(live[:, None], (ni, nc)).copy()
             tested = draw & (cls < 2)
-            if cull_frustum:
-                pj = rows_point3(J, [S[..., 0], S[..., 1], S[..., 2]])
-                w = rows_point3(model, pj)
-                r = ((S[..., 3] * sr) * scale_bound(J)) * s
-                fr = tested & planes_outside(w, r, cc)
-                counts["culled_frustum"] += int(fr.sum())
-                draw &= ~fr
-                tested &= ~fr
-            if cull_backface:
-                bf = tested & (cls == 0) & backfacing(S, sr, con[None], model, normal, J, cc)
-                counts["culled_backface"] += int(bf.sum())
-                draw &= ~bf
+            pj = rows_point3(J, [S[..., 0], S[..., 1], S[..., 2]])
+            w = rows_point3(model, pj)
+            r = ((S[..., 3] * sr) * scale_bound(J)) * s
+            mask = np.full((ni, nc), np.uint64((1 << len(ccs)) - 1))
+            all_outside = tested.copy()
+            for v, cc in enumerate(ccs):
+                outside = tested & planes_outside(w, r, cc) if cull_frustum else np.zeros((ni, nc), bool)
+                back = tested & ~outside & (cls == 0) & backfacing(S, sr, con[None], model, normal, J, cc) \
+                    if cull_backface else np.zeros((ni, nc), bool)
+                mask &= np.where(outside | back, ~np.uint64(1 << v), ~np.uint64(0))
+                all_outside &= outside
+            dropped = draw & (mask == 0)
+            counts["culled_frustum"] += int((dropped & all_outside).sum())
+            counts["culled_backface"] += int((dropped & ~all_outside).sum())
+            draw &= ~dropped
             ii, cc_ = np.nonzero(draw)
             counts["selected"] += len(ii)
             counts["triangles"] += int(meta[cc_, 2].astype(np.int64).sum())
             pairs.append(np.stack([ii + i0, cc_ + c0], axis=1).astype(np.uint32))
-    out = np.concatenate(pairs) if pairs else np.zeros((0, 2), np.uint32)
-    return out[np.lexsort((out[:, 1], out[:, 0]))], counts
+            masks.append(mask[ii, cc_])
+    counts_of = np.zeros(max(tris, default=-1) + 1, np.int64)
+    counts_of[list(tris)] = list(tris.values())
+    return sort_views(pairs, masks, counts, len(ccs), counts_of)

@@ -1,7 +1,11 @@
 """One frame, the only driver of a frame (the API, CLI, gallery and bench call it): the plan's
 passes, coarsest first -> each keys pass enqueued whole (LOD stages, renderers, downsample,
 resolve) and waited for once -> gl passes -> composite by depth when there are several -> Frame,
-read back lazily."""
+read back lazily.
+
+A multi-view frame (``render_views``) is the same frame for a ``Views`` of N cameras: each LOD
+stage runs once for all of them, each keys pass draws into N layers of key buffers and each gl
+pass into N layers of its targets, and the passes of each view are composited into its Frame."""
 from __future__ import annotations
 
 import time
@@ -12,11 +16,12 @@ import numpy as np
 
 from paramlod.core.camera import Camera, pixel_world_size
 from paramlod.core.frame import FrameStats
+from paramlod.core.views import Views
 from paramlod.device.context import cl_device
 from paramlod.errors import SceneError
 from paramlod.pipeline.composite import composite
 from paramlod.pipeline.passes import SceneState
-from paramlod.pipeline.plan import check_variant
+from paramlod.pipeline.plan import check_variant, multiview_variants
 from paramlod.pipeline.settings import RenderSettings
 from paramlod.scene.scene import Scene
 
@@ -43,6 +48,20 @@ class Pipeline:
         note_nothing_drawn(frame, frames, camera)
         return frame
 
+    def render_views(self, scene: Scene, cameras, variant: str | None = None,
+                     settings: RenderSettings | None = None, time_: float | None = None) -> list:
+        """One Frame per camera of ``cameras`` from one LOD pass; see ``paramlod.render_views``."""
+        views = Views(cameras)
+        passes = self.passes(scene, views, variant, settings, time_)   # per pass: a Frame per view
+        out = []
+        for v, camera in enumerate(views):
+            frames = [p[v] for p in passes]
+            frame = frames[0] if len(frames) == 1 else composite(frames, background=scene.background)
+            note_nothing_drawn(frame, frames, camera, others_drew=any(
+                int(q[u].stats.get("pixels_written", 0)) for q in passes for u in range(len(views)) if u != v))
+            out.append(frame)
+        return out
+
     def render_on_device(self, scene: Scene, camera: Camera, variant: str | None = None,
                          settings: RenderSettings | None = None) -> FrameStats:
         """One frame up to resolved buffers on the device (what an interactive viewer pays); its stats.
@@ -52,10 +71,11 @@ class Pipeline:
 
     def passes(self, scene: Scene, camera: Camera, variant: str | None = None,
                settings: RenderSettings | None = None, time_: float | None = None) -> list:
-        """The Frames of the frame's passes, coarsest first, before they are composited."""
+        """The Frames of the frame's passes, coarsest first, before they are composited; for a
+        ``Views``, each pass gives a list of Frames, one per view."""
         if not isinstance(scene, Scene):
             raise SceneError(f"render needs a paramlod.Scene, got {type(scene).__name__}")
-        if not isinstance(camera, Camera):
+        if not isinstance(camera, (Camera, Views)):
             raise SceneError(f"render needs a paramlod.Camera, got {type(camera).__name__}")
         check_variant(variant)
         if not scene.object_count:
@@ -67,7 +87,10 @@ class Pipeline:
         settings.points.validate()
         st = self.state(scene)
         frames = []
-        for p in st.update(scene, variant, settings):
+        passes = st.update(scene, variant, settings)
+        if isinstance(camera, Views):
+            check_multiview(passes)
+        for p in passes:
             if p.target == "gl":
                 frames.append(self._gl_pass(st, p, camera, settings))
             else:
@@ -85,9 +108,11 @@ class Pipeline:
     def _keys_pass(self, st, p, scene, camera, settings):
         t0 = time.perf_counter()
         ss = p.ss
-        frame_keys = st.keys(camera.size, ss)
+        layers = len(camera) if isinstance(camera, Views) else 1
+        frame_keys = st.keys(camera.size, ss, layers)
         if ss > 1:
-            target, cam = st.subsample_keys(camera.size, ss), camera.with_size((camera.width * ss, camera.height * ss))
+            target = st.subsample_keys(camera.size, ss, layers)
+            cam = camera.with_size((camera.width * ss, camera.height * ss))
         else:
             target, cam = frame_keys, camera
         drawn = [(g, st.renderer(g)) for g in p.groups]
@@ -130,16 +155,47 @@ class Pipeline:
         ms.update(upload=(t_upload - t0) * 1e3, resolve=_event_ms(resolved) + _event_ms(downsampled),
                   host=(t_upload - t0 + host) * 1e3, frame=(t_end - t0) * 1e3, readback=0.0,
                   total=(t_end - t0) * 1e3)
-        frame = frame_keys.frame()
-        frame.stats = FrameStats(stats)
-        return frame
+        if not isinstance(camera, Views):
+            frame = frame_keys.frame()
+            frame.stats = FrameStats(stats)
+            return frame
+        frames = frame_keys.frames()
+        for v, frame in enumerate(frames):
+            frame.stats = FrameStats(view_stats(stats, v, len(frames), frame_keys.layer_counts(v), ss))
+        return frames
 
 
-def note_nothing_drawn(frame, frames, camera) -> None:
+def check_multiview(passes) -> None:
+    """A SceneError naming the variants of a multi-view frame that draw one view only."""
+    single = sorted({g.spec.variant for p in passes for g in p.groups if not g.spec.multiview})
+    if single:
+        raise SceneError(f"render_views: variant {', '.join(single)} draws one view at a time; use a multi-view variant "
+                         f"({', '.join(multiview_variants())}) or render each camera with render()")
+
+
+def view_stats(stats: dict, view: int, n_views: int, counts: dict, ss: int) -> dict:
+    """The stats of view ``view`` of a multi-view keys pass: the frame's (LOD, samples, times: shared
+    by every view), with this view's written pixels and, from the renderers' per-view counters
+    (``stats["views"]``), this view's share."""
+    out = dict(stats, view=view, views=n_views, pixels_written=counts["pixels_written"])
+    if ss > 1:
+        out["covered_subsamples"] = counts["covered_subsamples"]
+    per_view = stats.get("views")
+    if per_view:
+        out["view_counts"] = per_view[view]
+    return out
+
+
+def note_nothing_drawn(frame, frames, camera, others_drew: bool = False) -> None:
     """``stats["nothing_drawn"]``: None, or why a frame covers no pixel (also in ``warnings``), so
-    an empty image is never taken for a render (objects at 1e10 gave one with exit code 0)."""
+    an empty image is never taken for a render (objects at 1e10 gave one with exit code 0).
+    ``others_drew``: a view of a multi-view frame whose other views drew (a cube face looking away
+    from the scene): it only notes that no object lies in this view, without a warning."""
     stats = frame.stats
     reason = None
+    if not int(stats.get("pixels_written", 0)) and others_drew:
+        stats["nothing_drawn"] = "nothing drawn: no object lies in this view (other views of the frame drew)"
+        return
     if not int(stats.get("pixels_written", 0)):
         parts = [f.stats for f in frames]
         patches = sum(int(p.get("render_patches", 0)) for p in parts)
@@ -180,12 +236,23 @@ def _keys_stats(parts: list[dict], names: list[str]) -> dict:
                 out["surfels"] += v
             elif k == "lod_steps":
                 out["lod_steps"] = out["lod_steps"] or v
+            elif k == "views":   # per-view counters: merged view by view
+                prev = out.get("views")
+                out["views"] = v if prev is None else [_merge_counts(a, b) for a, b in zip(prev, v)]
             elif isinstance(v, (int, float)) and not isinstance(v, bool) and k in out and k != "variant":
                 out[k] += v
             else:
                 out.setdefault(k, v)
     if len(parts) > 1:
         out["passes"] = [dict(p, variant=n) for p, n in zip(parts, names)]
+    return out
+
+
+def _merge_counts(a: dict, b: dict) -> dict:
+    """Two renderers' counters of one view: numbers added, lists (per-object records) joined."""
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = out[k] + v if k in out else v
     return out
 
 
@@ -208,6 +275,18 @@ def render(scene: Scene, camera: Camera, variant: str | None = None, settings: R
     return PIPELINE.render(scene, camera, variant, settings, time)
 
 
+def render_views(scene: Scene, cameras, variant: str | None = None, settings: RenderSettings | None = None,
+                 time: float | None = None) -> list:
+    """Render ``scene`` for every camera of ``cameras`` (one size; e.g. ``paramlod.views.stereo``,
+    ``cube_faces``, ``quilt``) from one LOD pass; returns one Frame per camera.
+
+    A patch (or mesh cluster, or surfel prefix) is refined as far as the view that needs most
+    asks, and culled only when no view sees it; every renderer then amplifies per view at its
+    last stage. ``frame.stats["view"]`` is its index; LOD, sample and time figures are those of
+    the whole multi-view frame, ``pixels_written`` the view's own."""
+    return PIPELINE.render_views(scene, cameras, variant, settings, time)
+
+
 def render_on_device(scene: Scene, camera: Camera, variant: str | None = None,
                      settings: RenderSettings | None = None) -> FrameStats:
     """``render`` up to resolved buffers on the device; returns the frame's stats."""
@@ -226,4 +305,5 @@ def scene_state(scene: Scene) -> SceneState:
     return PIPELINE.state(scene)
 
 
-__all__ = ["Pipeline", "PIPELINE", "note_nothing_drawn", "render", "render_on_device", "render_passes", "scene_state"]
+__all__ = ["Pipeline", "PIPELINE", "note_nothing_drawn", "render", "render_on_device", "render_passes",
+           "render_views", "scene_state"]

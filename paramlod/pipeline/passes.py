@@ -1,9 +1,11 @@
 """State by lifetime. Per scene (``SceneState``): the plan, each group's subscene and renderer
 state (compiled programs, uploads, LOD buffers), kept while the scene lives and reused across its
 versions when a group draws the same functions. Per view: the key buffers of each (size,
-subsamples) and their downsamples. Per frame: FrameStats (built by the driver)."""
+subsamples, layers) and their downsamples (a multi-view frame's keys have a layer per view). Per
+frame: FrameStats (built by the driver)."""
 from __future__ import annotations
 
+from paramlod.device.context import cl_device
 from paramlod.errors import SceneError
 from paramlod.pipeline.plan import plan
 from paramlod.renderers.registry import KINDS
@@ -19,7 +21,7 @@ class SceneState:
         self.subscenes: dict = {}      # Group -> its subscene
         self._by_group: dict = {}      # Group -> its renderer state, for the current plan
         self._renderers: dict = {}     # (variant, aa, functions) -> renderer state
-        self._keys: dict = {}          # (w, h, ss) -> KeyBuffer
+        self._keys: dict = {}          # (w, h, ss, layers) -> KeyBuffer
         self._downsample: dict = {}    # ss -> Downsample
 
     def update(self, scene, variant, settings):
@@ -53,29 +55,36 @@ class SceneState:
         """The renderer states made so far (for memory figures)."""
         return list(self._renderers.values())
 
-    def keys(self, size, ss: int = 1) -> KeyBuffer:
-        """The frame-sized key buffers of a pass with ``ss`` subsamples per pixel side."""
-        return self._buffer(size[0], size[1], ss)
+    def keys(self, size, ss: int = 1, layers: int = 1) -> KeyBuffer:
+        """The frame-sized key buffers of a pass with ``ss`` subsamples per pixel side (``layers``:
+        one per view)."""
+        return self._buffer(size[0], size[1], ss, layers)
 
-    def subsample_keys(self, size, ss: int) -> KeyBuffer:
+    def subsample_keys(self, size, ss: int, layers: int = 1) -> KeyBuffer:
         """The key buffers ``ss`` times the frame's size that a supersampled pass draws into."""
         w, h = size[0] * ss, size[1] * ss
         if max(w, h) > MAX_SIDE:
             raise SceneError(f"points supersample {ss} at {size[0]}x{size[1]} needs {w}x{h} subsamples, more "
                              f"than {MAX_SIDE} a side; use a smaller factor or frame")
-        return self._buffer(w, h, 0)
+        return self._buffer(w, h, 0, layers)
 
     def downsample(self, ss: int) -> Downsample:
         if ss not in self._downsample:
             self._downsample[ss] = Downsample(ss)
         return self._downsample[ss]
 
-    def _buffer(self, w, h, ss) -> KeyBuffer:
-        key = (w, h, ss)
+    def _buffer(self, w, h, ss, layers) -> KeyBuffer:
+        key = (w, h, ss, layers)
         buf = self._keys.get(key)
         if buf is None:
             # free buffers of other sizes first (a resized view keeps only its own)
-            for k in [k for k in self._keys if k[2] == ss and k[:2] != (w, h)]:
+            for k in [k for k in self._keys if k[2] == ss and k != key]:
                 self._keys.pop(k)
-            buf = self._keys[key] = KeyBuffer(w, h, max(ss, 1))
+            limit = cl_device().device.max_mem_alloc_size
+            if w * h * layers * 8 > limit:
+                views = f" x {layers} views" if layers > 1 else ""
+                raise SceneError(f"key buffers of {w}x{h} keys{views} need {w * h * layers * 8 / 2**20:.0f} MiB each, "
+                                 f"more than this device allocates at once ({limit / 2**20:.0f} MiB); use fewer views, "
+                                 "a smaller frame or less supersampling")
+            buf = self._keys[key] = KeyBuffer(w, h, max(ss, 1), layers)
         return buf

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from paramlod.errors import SceneError
 from paramlod.renderers.aa import supersampling_only
-from paramlod.renderers.registry import KINDS, RendererSpec, renderer
+from paramlod.renderers.registry import KINDS, RENDERERS, RendererSpec, renderer
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,6 +30,11 @@ class Pass:
 def check_variant(variant) -> None:
     if variant is not None:
         renderer(variant)   # a SceneError naming the registered variants
+
+
+def multiview_variants() -> tuple[str, ...]:
+    """The variants that draw several views from one LOD pass (render_views)."""
+    return tuple(v for v, s in RENDERERS.items() if s.multiview)
 
 
 def plan(scene, variant, settings) -> list[Pass]:

@@ -13,9 +13,16 @@ fragment shader writes them at locations 0-3. The resolve (kernels/tess/tess_res
 the prelude and tess_common.glsl for its counter buffer): the hardware multisample resolve of the
 colour, box-averaged over the SSAA block (straight alpha = covered fraction); depth, normal and id of
 the nearest covered sample of the block, +inf / 0 / 0 where none is.
+
+Multi-view frames (``LayeredGLTargets``, the tess renderer's ``draw_views``): the same targets as
+2D texture arrays with one layer per view (multisampled arrays for MSAA), drawn in one pass whose
+last geometry stage picks the layer; the resolve and the readback then run layer by layer into the
+same single-layer output targets. moderngl makes neither multisampled texture arrays nor layered
+framebuffers, so these are made through the GL 4.5 direct-state-access entry points (``raw_gl``).
 """
 from __future__ import annotations
 
+import ctypes
 import math
 
 import moderngl
@@ -58,15 +65,18 @@ def effective_aa(ctx, mode) -> tuple[AAMode, AAMode, list[str]]:
     return req, eff, notes
 
 
-def resolve_program(ctx, ss: int, samples: int):
-    """The resolve program for ``ss`` x ``ss`` supersampling and ``samples`` multisamples, cached."""
+def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
+    """The resolve program for ``ss`` x ``ss`` supersampling and ``samples`` multisamples (of one
+    layer ``u_layer`` of texture arrays when ``layered``), cached."""
     programs = gl_cache(ctx).setdefault("gl_resolve_programs", {})
-    key = (ss, samples)
+    key = (ss, samples) if not layered else (ss, samples, "layered")
     prog = programs.get(key)
     if prog is None:
         defs = {"PL_SS": ss, "PL_SAMPLES": samples}
         if samples > 1:
             defs["PL_MS"] = 1
+        if layered:
+            defs["PL_LAYERED"] = 1
         head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in defs.items())
         # the very text the tess renderer compiled before the move (tess_common.glsl declares the
         # counter buffer the resolve reports the device's sample count into)
@@ -84,9 +94,42 @@ def resolve_program(ctx, ss: int, samples: int):
     return prog
 
 
-class GLTargets:
+class _Outputs:
+    """The single-sampled output targets at ``size`` the resolve draws into, and their readback."""
+
+    def _outputs(self, prog):
+        ctx, size = self.ctx, self.size
+        self.out_color = ctx.texture(size, 4, dtype="f4")
+        self.out_depth = ctx.texture(size, 1, dtype="f4")
+        self.out_normal = ctx.texture(size, 4, dtype="f4")
+        self.out_object = ctx.texture(size, 1, dtype="u4")
+        self.out_fbo = ctx.framebuffer([self.out_color, self.out_depth, self.out_normal, self.out_object])
+        self.samples_buffer = ctx.buffer(reserve=8)   # the resolve writes the device's sample count at [1]
+        self.resolve_vao = ctx.vertex_array(prog, [])
+
+    def _check_size(self):
+        ctx, (w, h), ss = self.ctx, self.size, self.ss
+        limit = min(int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)), int(ctx.info.get("GL_MAX_RENDERBUFFER_SIZE", 16384)))
+        if max(w * ss, h * ss) > limit:
+            raise SceneError(f"{ss}x{ss} supersampling of {w}x{h} needs {w * ss}x{h * ss} render targets, more than "
+                             f"this OpenGL device's limit of {limit} pixels per side; use a smaller size or less supersampling")
+
+    def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The resolved (colour [h, w, 4], depth [h, w], normal [h, w, 3], object id [h, w]),
+        contiguous host arrays with row 0 at the top."""
+        w, h = self.size
+        color = np.frombuffer(self.out_color.read(), np.float32).reshape(h, w, 4)[::-1]
+        depth = np.frombuffer(self.out_depth.read(), np.float32).reshape(h, w)[::-1]
+        normal = np.frombuffer(self.out_normal.read(), np.float32).reshape(h, w, 4)[::-1, :, :3]
+        ids = np.frombuffer(self.out_object.read(), np.uint32).reshape(h, w)[::-1]
+        return tuple(np.ascontiguousarray(a) for a in (color, depth, normal, ids))
+
+
+class GLTargets(_Outputs):
     """Render targets at the supersampled size (multisampled when ``samples`` > 1) and the
     single-sampled output targets at ``size``; ``what`` names the renderer in errors."""
+
+    layers = 0   # not layered (LayeredGLTargets)
 
     def __init__(self, ctx, size: tuple[int, int], ss: int, samples: int, what: str = "OpenGL"):
         self.ctx = ctx
@@ -94,10 +137,7 @@ class GLTargets:
         w, h = size
         big = (w * ss, h * ss)
         ms = samples if samples > 1 else 0
-        limit = min(int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)), int(ctx.info.get("GL_MAX_RENDERBUFFER_SIZE", 16384)))
-        if max(big) > limit:
-            raise SceneError(f"{ss}x{ss} supersampling of {w}x{h} needs {big[0]}x{big[1]} render targets, more than "
-                             f"this OpenGL device's limit of {limit} pixels per side; use a smaller size or less supersampling")
+        self._check_size()
         try:
             self.color = ctx.texture(big, 4, dtype="f2", samples=ms)
             self.depth = ctx.texture(big, 1, dtype="f4", samples=ms)
@@ -115,13 +155,7 @@ class GLTargets:
             single = [self.color_resolved] + ([] if ms else [self.depth, self.normal, self.object])
             for t in single:
                 t.filter = (ctx.NEAREST, ctx.NEAREST)
-            self.out_color = ctx.texture(size, 4, dtype="f4")
-            self.out_depth = ctx.texture(size, 1, dtype="f4")
-            self.out_normal = ctx.texture(size, 4, dtype="f4")
-            self.out_object = ctx.texture(size, 1, dtype="u4")
-            self.out_fbo = ctx.framebuffer([self.out_color, self.out_depth, self.out_normal, self.out_object])
-            self.samples_buffer = ctx.buffer(reserve=8)   # the resolve writes the device's sample count at [1]
-            self.resolve_vao = ctx.vertex_array(resolve_program(ctx, ss, samples), [])
+            self._outputs(resolve_program(ctx, ss, samples))
         except DeviceError:
             self.release()
             raise
@@ -156,16 +190,6 @@ class GLTargets:
         ctx.finish()
         return int(np.frombuffer(self.samples_buffer.read(8), np.uint32)[1])
 
-    def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The resolved (colour [h, w, 4], depth [h, w], normal [h, w, 3], object id [h, w]),
-        contiguous host arrays with row 0 at the top."""
-        w, h = self.size
-        color = np.frombuffer(self.out_color.read(), np.float32).reshape(h, w, 4)[::-1]
-        depth = np.frombuffer(self.out_depth.read(), np.float32).reshape(h, w)[::-1]
-        normal = np.frombuffer(self.out_normal.read(), np.float32).reshape(h, w, 4)[::-1, :, :3]
-        ids = np.frombuffer(self.out_object.read(), np.uint32).reshape(h, w)[::-1]
-        return tuple(np.ascontiguousarray(a) for a in (color, depth, normal, ids))
-
     def release(self):
         for name in ("resolve_vao", "fbo", "color_ms_fbo", "color_resolved_fbo", "out_fbo", "color", "depth",
                      "normal", "object", "zbuf", "color_resolved", "out_color", "out_depth", "out_normal",
@@ -178,12 +202,226 @@ class GLTargets:
                     pass
 
 
-def targets_for(current: GLTargets | None, ctx, size, ss: int, samples: int, what: str = "OpenGL") -> GLTargets:
-    """``current`` when it fits (size, ss, samples), else new targets (``current`` released)."""
-    if current is not None and (current.size, current.ss, current.samples) == (tuple(size), ss, samples):
+# --- layered targets (multi-view frames) --------------------------------------------------------
+GL_TEXTURE_2D_ARRAY, GL_TEXTURE_2D_MULTISAMPLE_ARRAY = 0x8C1A, 0x9102
+GL_RGBA16F, GL_R32F, GL_R32UI, GL_DEPTH_COMPONENT24 = 0x881A, 0x822E, 0x8236, 0x81A6
+GL_TEXTURE_MIN_FILTER, GL_TEXTURE_MAG_FILTER, GL_NEAREST = 0x2801, 0x2800, 0x2600
+GL_FRAMEBUFFER, GL_FRAMEBUFFER_COMPLETE = 0x8D40, 0x8CD5
+GL_COLOR_ATTACHMENT0, GL_DEPTH_ATTACHMENT = 0x8CE0, 0x8D00
+GL_COLOR, GL_DEPTH, GL_COLOR_BUFFER_BIT, GL_SCISSOR_TEST = 0x1800, 0x1801, 0x4000, 0x0C11
+GL_MAX_ARRAY_TEXTURE_LAYERS, GL_MAX_FRAMEBUFFER_LAYERS = 0x88FF, 0x9317
+GL_MAX_GEOMETRY_SHADER_INVOCATIONS = 0x8E5A
+
+_U, _I, _B = ctypes.c_uint, ctypes.c_int, ctypes.c_ubyte
+_UP, _FP = ctypes.POINTER(ctypes.c_uint), ctypes.POINTER(ctypes.c_float)
+_SIGNATURES = {
+    "glGetError": (_U, []),
+    "glGetIntegerv": (None, [_U, ctypes.POINTER(_I)]),
+    "glCreateTextures": (None, [_U, _I, _UP]),
+    "glTextureStorage3D": (None, [_U, _I, _U, _I, _I, _I]),
+    "glTextureStorage3DMultisample": (None, [_U, _I, _U, _I, _I, _I, _B]),
+    "glTextureParameteri": (None, [_U, _U, _I]),
+    "glDeleteTextures": (None, [_I, _UP]),
+    "glCreateFramebuffers": (None, [_I, _UP]),
+    "glDeleteFramebuffers": (None, [_I, _UP]),
+    "glNamedFramebufferTexture": (None, [_U, _U, _U, _I]),
+    "glNamedFramebufferTextureLayer": (None, [_U, _U, _U, _I, _I]),
+    "glNamedFramebufferDrawBuffers": (None, [_U, _I, _UP]),
+    "glCheckNamedFramebufferStatus": (_U, [_U, _U]),
+    "glClearNamedFramebufferfv": (None, [_U, _U, _I, _FP]),
+    "glBlitNamedFramebuffer": (None, [_U, _U] + [_I] * 8 + [_U, _U]),
+    "glBindFramebuffer": (None, [_U, _U]),
+    "glViewport": (None, [_I] * 4),
+    "glColorMaski": (None, [_U, _B, _B, _B, _B]),
+    "glDepthMask": (None, [_B]),
+    "glDisable": (None, [_U]),
+    "glBindTextureUnit": (None, [_U, _U]),
+}
+_gl_lib = None
+
+
+def raw_gl():
+    """The GL 4.5 entry points moderngl lacks (texture arrays with multisamples, layered
+    framebuffers), called on the current context (gl_context's) through the GL library."""
+    global _gl_lib
+    if _gl_lib is None:
+        for name in ("libOpenGL.so.0", "libGL.so.1"):
+            try:
+                lib = ctypes.CDLL(name)
+                break
+            except OSError:
+                continue
+        else:
+            raise DeviceError("multi-view OpenGL rendering needs libOpenGL.so.0 or libGL.so.1 (Debian: libopengl0)")
+        for fn, (res, args) in _SIGNATURES.items():
+            f = getattr(lib, fn)
+            f.restype, f.argtypes = res, args
+        _gl_lib = lib
+    return _gl_lib
+
+
+def gl_limit(name: int) -> int:
+    """glGetIntegerv of a limit moderngl's info dict lacks."""
+    value = ctypes.c_int(0)
+    raw_gl().glGetIntegerv(name, ctypes.byref(value))
+    return value.value
+
+
+class LayeredGLTargets(_Outputs):
+    """GLTargets for a multi-view frame: the draw targets as 2D texture arrays of ``layers``
+    layers (view v draws into layer v; multisampled arrays when ``samples`` > 1; the depth buffer
+    a depth texture array of the renderbuffer's format), resolved and read back one layer at a
+    time into single-layer output targets. Drawn either through the layered framebuffer (a
+    geometry stage picks each primitive's layer) or one layer at a time (``use_layer``)."""
+
+    def __init__(self, ctx, size: tuple[int, int], ss: int, samples: int, layers: int, what: str = "OpenGL"):
+        self.ctx = ctx
+        self.size, self.ss, self.samples, self.layers = tuple(size), ss, samples, int(layers)
+        w, h = size
+        self.big = (w * ss, h * ss)
+        self._check_size()
+        self.gl = gl = raw_gl()
+        most = min(gl_limit(GL_MAX_ARRAY_TEXTURE_LAYERS), gl_limit(GL_MAX_FRAMEBUFFER_LAYERS))
+        if not 1 <= self.layers <= most:
+            raise SceneError(f"{layers} views need as many layers of {what} render targets; this OpenGL device "
+                             f"({ctx.info.get('GL_RENDERER')}) allows 1..{most}")
+        self._textures, self._fbos = [], []
+        try:
+            while gl.glGetError():   # errors left by others are not ours
+                pass
+            self.color, self.depth, self.normal, self.object, self.zbuf = (
+                self._array(f) for f in (GL_RGBA16F, GL_R32F, GL_RGBA16F, GL_R32UI, GL_DEPTH_COMPONENT24))
+            draw = [self.color, self.depth, self.normal, self.object]
+            self.fbo = self._framebuffer(draw, self.zbuf)
+            self.layer_fbos = [self._framebuffer(draw, self.zbuf, layer) for layer in range(self.layers)]
+            if samples > 1:
+                # the hardware resolve, a layer at a time: that layer of the colour array blitted
+                # into a plain texture, which the resolve shader then reads
+                self.color_resolved = ctx.texture(self.big, 4, dtype="f2")
+                self.color_resolved.filter = (ctx.NEAREST, ctx.NEAREST)
+                self.layer_fbo = self._framebuffer([], None)
+                self.resolved_fbo = self._framebuffer([], None)
+                gl.glNamedFramebufferTexture(self.resolved_fbo, GL_COLOR_ATTACHMENT0, self.color_resolved.glo, 0)
+            self._outputs(resolve_program(ctx, ss, samples, layered=True))
+            err = gl.glGetError()
+            if err:
+                raise DeviceError(f"could not create the {what} render targets ({w}x{h}, {ss}x{ss} SS, {samples} "
+                                  f"samples, {layers} layers): OpenGL error 0x{err:04x} (0x0505: out of memory)")
+        except DeviceError:
+            self.release()
+            raise
+        except Exception as exc:  # moderngl.Error: out of memory, unsupported format
+            self.release()
+            raise DeviceError(f"could not create the {what} render targets ({w}x{h}, {ss}x{ss} SS, "
+                              f"{samples} samples, {layers} layers): {exc}") from None
+
+    def _array(self, fmt: int) -> int:
+        gl, (bw, bh) = self.gl, self.big
+        glo = ctypes.c_uint(0)
+        if self.samples > 1:
+            gl.glCreateTextures(GL_TEXTURE_2D_MULTISAMPLE_ARRAY, 1, ctypes.byref(glo))
+            gl.glTextureStorage3DMultisample(glo.value, self.samples, fmt, bw, bh, self.layers, 1)
+        else:
+            gl.glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, ctypes.byref(glo))
+            gl.glTextureStorage3D(glo.value, 1, fmt, bw, bh, self.layers)
+            # integer textures must be sampled with NEAREST (else incomplete)
+            for p in (GL_TEXTURE_MIN_FILTER, GL_TEXTURE_MAG_FILTER):
+                gl.glTextureParameteri(glo.value, p, GL_NEAREST)
+        self._textures.append(glo.value)
+        return glo.value
+
+    def _framebuffer(self, colors: list[int], depth: int | None, layer: int | None = None) -> int:
+        """A framebuffer of the arrays ``colors`` and ``depth``: layered, or of one ``layer``."""
+        gl = self.gl
+        glo = ctypes.c_uint(0)
+        gl.glCreateFramebuffers(1, ctypes.byref(glo))
+        fbo = glo.value
+        self._fbos.append(fbo)
+        if not colors:
+            return fbo
+        for att, tex in [(GL_COLOR_ATTACHMENT0 + i, t) for i, t in enumerate(colors)] + [(GL_DEPTH_ATTACHMENT, depth)]:
+            if layer is None:   # the whole array: a layered attachment
+                gl.glNamedFramebufferTexture(fbo, att, tex, 0)
+            else:
+                gl.glNamedFramebufferTextureLayer(fbo, att, tex, 0, layer)
+        bufs = (ctypes.c_uint * len(colors))(*(GL_COLOR_ATTACHMENT0 + i for i in range(len(colors))))
+        gl.glNamedFramebufferDrawBuffers(fbo, len(colors), bufs)
+        status = gl.glCheckNamedFramebufferStatus(fbo, GL_FRAMEBUFFER)
+        if status != GL_FRAMEBUFFER_COMPLETE:
+            raise DeviceError(f"this OpenGL device ({self.ctx.info.get('GL_RENDERER')}) cannot draw into layered "
+                              f"targets of {self.samples} samples: framebuffer status 0x{status:04x}")
+        return fbo
+
+    def begin(self):
+        """Bind the layered targets for drawing (outside moderngl, which keeps its own binding
+        and restores it at its next framebuffer call) and clear every layer's colour and depth
+        (see CLEAR_MASK)."""
+        gl, (bw, bh) = self.gl, self.big
+        self.use_layer(None)
+        gl.glViewport(0, 0, bw, bh)
+        gl.glDisable(GL_SCISSOR_TEST)
+        for i in range(len(DRAW_MASK)):
+            gl.glColorMaski(i, 1, 1, 1, 1)
+        gl.glDepthMask(1)
+        gl.glClearNamedFramebufferfv(self.fbo, GL_COLOR, 0, (ctypes.c_float * 4)(0.0, 0.0, 0.0, 0.0))
+        gl.glClearNamedFramebufferfv(self.fbo, GL_DEPTH, 0, (ctypes.c_float * 1)(1.0))
+
+    def use_layer(self, layer: int | None):
+        """Draw into layer ``layer`` alone from now on, or into the layered targets (None)."""
+        self.gl.glBindFramebuffer(GL_FRAMEBUFFER, self.fbo if layer is None else self.layer_fbos[layer])
+
+    def resolve(self, layer: int):
+        """Resolve layer ``layer`` into the output targets (not waited for: ``read`` waits)."""
+        ctx, gl = self.ctx, self.gl
+        if self.samples > 1:
+            bw, bh = self.big
+            gl.glNamedFramebufferTextureLayer(self.layer_fbo, GL_COLOR_ATTACHMENT0, self.color, 0, layer)
+            gl.glBlitNamedFramebuffer(self.layer_fbo, self.resolved_fbo, 0, 0, bw, bh, 0, 0, bw, bh,
+                                      GL_COLOR_BUFFER_BIT, GL_NEAREST)
+        ctx.disable(moderngl.DEPTH_TEST)
+        self.out_fbo.use()
+        self.samples_buffer.bind_to_storage_buffer(4)
+        prog = self.resolve_vao.program
+        color = self.color_resolved.glo if self.samples > 1 else self.color
+        for unit, (name, tex) in enumerate((("u_color", color), ("u_coverage", self.color), ("u_depth", self.depth),
+                                            ("u_normal", self.normal), ("u_object", self.object))):
+            gl.glBindTextureUnit(unit, tex)
+            set_uniform(prog, name, unit)
+        set_uniform(prog, "u_layer", int(layer))
+        self.resolve_vao.render(mode=moderngl.TRIANGLES, vertices=3)
+
+    def device_samples(self) -> int:
+        """The samples per pixel the device really allocated, as the last resolve saw (waits)."""
+        self.ctx.finish()   # the resolve's storage write, visible to the read
+        return int(np.frombuffer(self.samples_buffer.read(8), np.uint32)[1])
+
+    def release(self):
+        for name in ("resolve_vao", "out_fbo", "color_resolved", "out_color", "out_depth", "out_normal",
+                     "out_object", "samples_buffer"):
+            obj = self.__dict__.pop(name, None)
+            if obj is not None:
+                try:
+                    obj.release()
+                except Exception:
+                    pass
+        gl = self.__dict__.get("gl")
+        if gl is not None:
+            for items, delete in ((self._fbos, gl.glDeleteFramebuffers), (self._textures, gl.glDeleteTextures)):
+                if items:
+                    delete(len(items), (ctypes.c_uint * len(items))(*items))
+                items.clear()
+
+
+def targets_for(current, ctx, size, ss: int, samples: int, what: str = "OpenGL", layers: int = 0):
+    """``current`` when it fits (size, ss, samples, layers), else new targets (``current``
+    released): GLTargets, or LayeredGLTargets of ``layers`` layers when ``layers`` > 0."""
+    if current is not None and (current.size, current.ss, current.samples, current.layers) == (
+            tuple(size), ss, samples, layers):
         return current
     if current is not None:
         current.release()
+    if layers:
+        return LayeredGLTargets(ctx, tuple(size), ss, samples, layers, what)
     return GLTargets(ctx, tuple(size), ss, samples, what)
 
 

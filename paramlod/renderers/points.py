@@ -43,10 +43,14 @@ class DirectPointRenderer:
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
-                light_buf, keys, settings: PointSettings, record_args=()):
+                light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1):
         """Enqueue the render of the ``count_buf[count_at]`` (read on the device, at most
-        ``capacity``) patches of ``patches_buf`` without waiting; ``counts()`` reads the counters."""
+        ``capacity``) patches of ``patches_buf`` without waiting; ``counts()`` reads the counters.
+        ``n_views``: camera records in ``cam_buf``, each sample is written into layer v of
+        ``keys`` for every view v whose frustum holds it (``keys.layers`` must be ``n_views``)."""
         settings.validate()
+        if keys.layers != n_views:
+            raise ValueError(f"points: {n_views} views need key buffers of {n_views} layers, got {keys.layers}")
         q = cl_device().queue
         capacity = max(int(capacity), 1)
         if capacity > self.order_capacity:
@@ -55,7 +59,7 @@ class DirectPointRenderer:
         cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
         sampling = (settings.factor(), settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), self._order,
-                *inst, materials_buf, cam_buf, light_buf, *sampling, np.float32(settings.widen),
+                *inst, materials_buf, cam_buf, np.uint32(n_views), light_buf, *sampling, np.float32(settings.widen),
                 np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)), keys.color, keys.aux,
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
@@ -85,11 +89,11 @@ class DirectPointRenderer:
         return {k: int(v) for k, v in zip(COUNTERS, self._counts)}
 
     def draw(self, patches_buf, n_patches, inst, materials_buf, cam_buf, light_buf, keys,
-             settings: PointSettings, record_args=()):
+             settings: PointSettings, record_args=(), n_views: int = 1):
         """Render ``n_patches`` render patches into ``keys`` and wait; returns the counters (COUNTERS)."""
         cl.enqueue_copy(cl_device().queue, self._count, np.array([n_patches], np.uint32))
         self.enqueue(patches_buf, self._count, 0, n_patches, inst, materials_buf, cam_buf, light_buf, keys,
-                     settings, record_args)
+                     settings, record_args, n_views)
         return self.counts()
 
 
@@ -109,9 +113,10 @@ class DirectPoints:
 
     def enqueue(self, target, settings):
         d = self.dev
-        self.lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod)
+        self.lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"])
         self.points.enqueue(self.lod.render.buf, self.lod.counters, LOD_RENDER_TOTAL, self.lod.render.capacity,
-                            d["inst"], d["materials"], d["cam"], d["light"], target, settings.points)
+                            d["inst"], d["materials"], d["cam"], d["light"], target, settings.points,
+                            n_views=d["n_views"])
 
     def collect(self):
         self.lod.read_counters(wait=False)
@@ -128,4 +133,5 @@ class DirectPoints:
 
 
 register_renderer(RendererSpec("points", "parametric", DirectPoints, "points", "keys", PointSettings,
-                               "samples on a (u, v) grid per render patch, 64-bit atom_min into the key buffers"))
+                               "samples on a (u, v) grid per render patch, 64-bit atom_min into the key buffers",
+                               multiview=True))

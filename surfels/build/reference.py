@@ -7,6 +7,7 @@ import numpy as np
 
 from paramlod.core.color import linear_to_srgb8_f64
 from paramlod.core.hashing import dither
+from paramlod.core.layouts import CAMERA
 from paramlod.surfels.build.schedule import (ALL_ONES, HI, f32_bits, handover_r2, key_pixel, key_r2, level_strides,
                                              remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
 
@@ -210,7 +211,26 @@ def splat_discs(pos4, nrm4, albedo4, n, radius, xf, cam, inv_proj, light, specul
     """(colour keys, aux keys), uint64 (H, W): the discs of the first n surfels, atom_min'd into
     cleared buffers, less the pixels whose hand-off dither is below ``mesh_weight`` (the mesh's).
     Coverage and depth bits follow the kernel's float32 operations exactly; colour and normal
-    bits are float64 (they may differ by one unit)."""
+    bits are float64 (they may differ by one unit).
+
+    Several views: ``cam`` holds N camera records one after another, ``xf`` and ``inv_proj`` N
+    records of 24 and 16 floats, ``radius`` and ``mesh_weight`` one number for all or one per
+    view; the keys are (N, H, W), layer v view v's (a weight of 1: the view draws nothing)."""
+    cams = np.asarray(cam, np.float32).reshape(-1, CAMERA.length)
+    nv = len(cams)
+    xfs = np.asarray(xf, np.float32).reshape(nv, 24)
+    ips = np.asarray(inv_proj, np.float32).reshape(nv, 16)
+    radii = np.broadcast_to(np.asarray(radius, np.float32), (nv,))
+    weights = np.broadcast_to(np.asarray(mesh_weight, np.float32), (nv,))
+    layers = [_splat_view(pos4, nrm4, albedo4, n, radii[v], xfs[v], cams[v], ips[v], light, specular, object_id,
+                          weights[v]) for v in range(nv)]
+    if nv == 1:
+        return layers[0]
+    return np.stack([c for c, _ in layers]), np.stack([a for _, a in layers])
+
+
+def _splat_view(pos4, nrm4, albedo4, n, radius, xf, cam, inv_proj, light, specular, object_id, mesh_weight):
+    """One view of splat_discs: its keys, uint64 (H, W) each."""
     W, H = int(cam[32]), int(cam[33])
     near, far = _f(cam[34]), _f(cam[35])
     V = np.asarray(cam[0:16], np.float64)
@@ -226,7 +246,7 @@ def splat_discs(pos4, nrm4, albedo4, n, radius, xf, cam, inv_proj, light, specul
     w = _f(mesh_weight)
     mine = ~(dither(xs, ys) < w) if w > 0 else np.ones(H * W, bool)
     with np.errstate(all="ignore"):
-        for i in range(n):
+        for i in range(n if w < 1 else 0):   # weight 1: the kernel skips the view
             e = _rows_point(xf[:12], pos4[i, :3].astype(np.float32))
             nv = _rows_dir(xf[12:24], nrm4[i, :3].astype(np.float32))
             den = _dot(d, nv)

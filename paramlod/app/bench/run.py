@@ -11,8 +11,9 @@ throughput of every built-in function, and the blue-surfel sampling and prefix-r
 the mesh LOD measurements (extra "meshes", paramlod.app.bench.meshes) and, on request, the mesh-LOD
 evaluation of full mesh / discrete chain / cluster DAG (extra "mesh-eval",
 paramlod.app.bench.mesh_eval) and the skinned giant worm with its culling on and off (extra
-"skinned", paramlod.app.bench.skinned) and the viewer's presenting overhead (extra "viewer",
-paramlod.app.bench.viewer). ``--only-extras`` skips the parametric scenarios.
+"skinned", paramlod.app.bench.skinned), the viewer's presenting overhead (extra "viewer",
+paramlod.app.bench.viewer) and multi-view frames against as many single ones (extra "multiview",
+paramlod.app.bench.multiview). ``--only-extras`` skips the parametric scenarios.
 Results go to DIR/results.json (written after every measurement), DIR/results.md and plots.
 """
 from __future__ import annotations
@@ -33,6 +34,7 @@ from paramlod.app.args import add_size, check_folder, non_negative_int, positive
 from paramlod.app.bench.mesh_eval import SCENARIOS as EVAL_SCENARIOS, THRESHOLDS as EVAL_THRESHOLDS
 from paramlod.app.bench.mesh_eval import format_mesh_eval, plot_mesh_eval, run_mesh_eval
 from paramlod.app.bench.meshes import format_meshes, run_meshes
+from paramlod.app.bench.multiview import SCENES as MULTIVIEW_SCENES, VIEW_SETS, format_multiview, run_multiview
 from paramlod.app.bench.skinned import format_skinned, run_skinned
 from paramlod.app.bench.viewer import format_viewer, run_viewer
 from paramlod.app.bench.scenes import DEFAULT, SCENARIOS
@@ -71,10 +73,14 @@ def add_arguments(p):
     p.add_argument("--frames", type=positive_int, default=8, help="timed frames per orbit (default 8)")
     p.add_argument("--warmup", type=non_negative_int, default=2, help="untimed frames before each orbit (default 2)")
     p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels", "meshes"],
-                   choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval", "skinned", "viewer"],
+                   choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval", "skinned", "viewer", "multiview"],
                    help="extra measurements (default all but mesh-eval, the full / chain / DAG evaluation, "
-                        "skinned, the rigged giant worm with its conservative culling, and viewer, the "
-                        "interactive viewer's presenting overhead)")
+                        "skinned, the rigged giant worm with its conservative culling, viewer, the "
+                        "interactive viewer's presenting overhead, and multiview, N views in one frame)")
+    p.add_argument("--views", type=positive_int, nargs="+", default=list(VIEW_SETS),
+                   help="multiview: view counts (2: a stereo pair, others: quilts; default 2 6 48)")
+    p.add_argument("--multiview-scenes", nargs="+", choices=list(SCENARIOS), default=list(MULTIVIEW_SCENES),
+                   help="multiview: scenarios (default hardi12 yarn_curtain sphere)")
     p.add_argument("--only-extras", action="store_true", help="skip the parametric scenarios: only the extras")
     p.add_argument("--big-mesh", choices=["auto", "yes", "no"], default="auto",
                    help="also measure a 1.6 M-triangle mesh (default: on a GPU only)")
@@ -348,6 +354,11 @@ def run_bench(args) -> int:
     if "viewer" in args.extras:
         result["viewer"] = run_viewer(size, args.frames, args.warmup, log=lambda m: print(m, flush=True))
         save()
+    if "multiview" in args.extras:
+        variants = [v for v in ("points", "tess") if v in args.variants] or ["points", "tess"]
+        result["multiview"] = run_multiview(size, args.frames, args.warmup, args.multiview_scenes, variants,
+                                            args.views, log=lambda m: print(m, flush=True))
+        save()
     if "mesh-eval" in args.extras:
         big = args.big_mesh == "yes" or (args.big_mesh == "auto" and dev.is_gpu)
         result["mesh_eval"] = run_mesh_eval(size, args.frames, args.warmup, big, args.mesh_grid, args.eval_thresholds,
@@ -418,6 +429,8 @@ def format_markdown(result) -> str:
         lines += format_skinned(result["skinned"])
     if "viewer" in result:
         lines += format_viewer(result["viewer"])
+    if "multiview" in result:
+        lines += format_multiview(result["multiview"])
     if "mesh_eval" in result:
         lines += format_mesh_eval(result["mesh_eval"])
     return "\n".join(lines) + "\n"
