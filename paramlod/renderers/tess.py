@@ -482,9 +482,10 @@ class TessRenderer:
             color, depth, normal, ids = tg.read()
             frame = Frame(color=color, depth=depth, normal=normal, object_id=ids)
             frame.background = scene.background
-            t6 = time.perf_counter()
+            written = int(np.count_nonzero(np.isfinite(depth)))
+            t6 = time.perf_counter()   # readback, as draw's: to host arrays, and the pixels counted
             frames.append(frame)
-            own = {"view": v, "pixels_written": int(np.count_nonzero(np.isfinite(depth))),
+            own = {"view": v, "pixels_written": written,
                    "view_ms": {"resolve": (t5 - t4) * 1e3, "readback": (t6 - t5) * 1e3}}
             if invocations == 1:
                 own["view_triangles"] = drawn[v] if n else 0

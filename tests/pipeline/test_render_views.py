@@ -72,6 +72,22 @@ def test_views_that_see_different_objects_equal_their_single_view_renders(aa):
     assert frames[0].stats["render_patches"] == sum(single)    # one shared list, no patch twice
 
 
+def test_mixed_scenes_composite_each_view_like_a_single_view_frame():
+    """Objects of two variants (points and tess passes) composited by depth in every view."""
+    scene = pl.Scene()
+    scene.add("sphere", transform=pl.translate((4, 0, 0)), variant="points")
+    scene.add("torus", transform=pl.translate((4, 0, 1.2)), variant="tess")
+    scene.add("torus", transform=pl.translate((-4, 0, 0)) @ pl.rotate(60, (1, 0, 0)), variant="tess")
+    cams = [facing((1, 0, 0)), facing((-1, 0, 0))]
+    frames = pl.render_views(scene, cams)
+    for cam, frame in zip(cams, frames):
+        single = pl.render(scene, cam)
+        same_frame(frame, single)
+        assert frame.stats["variant"] == single.stats["variant"]
+    assert set(np.unique(frames[0].object_id)) == {0, 1, 2}      # both variants in the first view
+    assert set(np.unique(frames[1].object_id)) == {0, 3}
+
+
 def test_a_view_is_never_coarser_than_its_single_view_render():
     """Overlapping views (a stereo pair, a quilt): each view agrees with its own single-view frame
     in coverage and depth, and its LOD is at least as fine."""

@@ -14,21 +14,12 @@ from paramlod.renderers.registry import renderer  # noqa: E402
 from paramlod.renderers.shading import LIGHT  # noqa: E402
 from paramlod.renderers.targets import KeyBuffer  # noqa: E402
 from paramlod.surfels import FixedCount, FixedSize, SurfelError, draw_surfels  # noqa: E402
-from paramlod.surfels.build import OrthoCamera, sample_mesh  # noqa: E402
+from paramlod.surfels.build import OrthoCamera  # noqa: E402
 from paramlod.surfels.build import reference as ref  # noqa: E402
 from paramlod.surfels.render import VIEW_FLOATS, SurfelSplats, _DeviceSurfels  # noqa: E402
 
 ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 SIZE = (64, 48)
-
-
-@pytest.fixture(scope="module")
-def ball():
-    """1500 surfels of a unit icosphere with vertex colours."""
-    m = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
-    m.visual.vertex_colors = np.column_stack([
-        (m.vertices * 0.5 + 0.5) * 255, np.full(len(m.vertices), 255)]).astype(np.uint8)
-    return sample_mesh(m, 1500, views=8, resolution=64)
 
 
 def look(eye, target=(0, 0, 0), size=SIZE, fov=40, near=0.5, far=60):

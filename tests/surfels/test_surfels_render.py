@@ -11,21 +11,12 @@ from paramlod.core.layouts import camera_record
 from paramlod.renderers.shading import LIGHT  # noqa: E402
 from paramlod.surfels import (FixedCount, FixedSize, FrameTimeAdaptive, SurfelError, choose_prefix,  # noqa: E402
                               draw_surfels, render_surfels)
-from paramlod.surfels.build import OrthoCamera, sample_mesh  # noqa: E402
+from paramlod.surfels.build import OrthoCamera  # noqa: E402
 from paramlod.surfels.build import reference as ref  # noqa: E402
 from paramlod.surfels.render import _DeviceSurfels, draw_records, pixel_world_size  # noqa: E402
 from paramlod.core.transforms import rotate, scale, translate  # noqa: E402
 
 ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
-
-
-@pytest.fixture(scope="module")
-def ball():
-    """1500 surfels of a unit icosphere with vertex colours."""
-    m = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
-    m.visual.vertex_colors = np.column_stack([
-        (m.vertices * 0.5 + 0.5) * 255, np.full(len(m.vertices), 255)]).astype(np.uint8)
-    return sample_mesh(m, 1500, views=8, resolution=64)
 
 
 def ortho_camera(size=(48, 40)):
