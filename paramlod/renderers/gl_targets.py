@@ -271,8 +271,8 @@ class LayeredGLTargets(_Outputs):
     """GLTargets for a multi-view frame: the draw targets as 2D texture arrays of ``layers``
     layers (view v draws into layer v; multisampled arrays when ``samples`` > 1; the depth buffer
     a depth texture array of the renderbuffer's format), resolved and read back one layer at a
-    time into single-layer output targets. Drawn either through the layered framebuffer (a
-    geometry stage picks each primitive's layer) or one layer at a time (``use_layer``)."""
+    time into single-layer output targets. Drawn through the layered framebuffer: a geometry
+    stage picks each primitive's layer (tess with views_per_pass > 1, meshlets-gl)."""
 
     def __init__(self, ctx, size: tuple[int, int], ss: int, samples: int, layers: int, what: str = "OpenGL"):
         self.ctx = ctx
@@ -293,7 +293,6 @@ class LayeredGLTargets(_Outputs):
                 self._array(f) for f in (GL_RGBA16F, GL_R32F, GL_RGBA16F, GL_R32UI, GL_DEPTH_COMPONENT24))
             draw = [self.color, self.depth, self.normal, self.object]
             self.fbo = self._framebuffer(draw, self.zbuf)
-            self.layer_fbos = [self._framebuffer(draw, self.zbuf, layer) for layer in range(self.layers)]
             if samples > 1:
                 # the hardware resolve, a layer at a time: that layer of the colour array blitted
                 # into a plain texture, which the resolve shader then reads
@@ -330,8 +329,8 @@ class LayeredGLTargets(_Outputs):
         self._textures.append(glo.value)
         return glo.value
 
-    def _framebuffer(self, colors: list[int], depth: int | None, layer: int | None = None) -> int:
-        """A framebuffer of the arrays ``colors`` and ``depth``: layered, or of one ``layer``."""
+    def _framebuffer(self, colors: list[int], depth: int | None) -> int:
+        """A layered framebuffer of the arrays ``colors`` and ``depth``."""
         gl = self.gl
         glo = ctypes.c_uint(0)
         gl.glCreateFramebuffers(1, ctypes.byref(glo))
@@ -340,10 +339,7 @@ class LayeredGLTargets(_Outputs):
         if not colors:
             return fbo
         for att, tex in [(GL_COLOR_ATTACHMENT0 + i, t) for i, t in enumerate(colors)] + [(GL_DEPTH_ATTACHMENT, depth)]:
-            if layer is None:   # the whole array: a layered attachment
-                gl.glNamedFramebufferTexture(fbo, att, tex, 0)
-            else:
-                gl.glNamedFramebufferTextureLayer(fbo, att, tex, 0, layer)
+            gl.glNamedFramebufferTexture(fbo, att, tex, 0)   # the whole array: a layered attachment
         bufs = (ctypes.c_uint * len(colors))(*(GL_COLOR_ATTACHMENT0 + i for i in range(len(colors))))
         gl.glNamedFramebufferDrawBuffers(fbo, len(colors), bufs)
         status = gl.glCheckNamedFramebufferStatus(fbo, GL_FRAMEBUFFER)
@@ -357,7 +353,7 @@ class LayeredGLTargets(_Outputs):
         and restores it at its next framebuffer call) and clear every layer's colour and depth
         (see CLEAR_MASK)."""
         gl, (bw, bh) = self.gl, self.big
-        self.use_layer(None)
+        gl.glBindFramebuffer(GL_FRAMEBUFFER, self.fbo)
         gl.glViewport(0, 0, bw, bh)
         gl.glDisable(GL_SCISSOR_TEST)
         for i in range(len(DRAW_MASK)):
@@ -365,10 +361,6 @@ class LayeredGLTargets(_Outputs):
         gl.glDepthMask(1)
         gl.glClearNamedFramebufferfv(self.fbo, GL_COLOR, 0, (ctypes.c_float * 4)(0.0, 0.0, 0.0, 0.0))
         gl.glClearNamedFramebufferfv(self.fbo, GL_DEPTH, 0, (ctypes.c_float * 1)(1.0))
-
-    def use_layer(self, layer: int | None):
-        """Draw into layer ``layer`` alone from now on, or into the layered targets (None)."""
-        self.gl.glBindFramebuffer(GL_FRAMEBUFFER, self.fbo if layer is None else self.layer_fbos[layer])
 
     def resolve(self, layer: int):
         """Resolve layer ``layer`` into the output targets (not waited for: ``read`` waits)."""

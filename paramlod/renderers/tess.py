@@ -18,11 +18,12 @@ object id R32UI, resolved to the nearest covered sample of the pixel). ``docs/te
 the details, including how cracks between patches are avoided.
 
 Multi-view frames (``draw_views``, ``paramlod.render_views``): the render list of one LOD pass for
-all views is uploaded once and drawn into layered targets (``LayeredGLTargets``, a layer per view),
-``TessSettings.views_per_pass`` views a pass. One (the default): each view is a pass of the
-single-view program into its layer, so each view is tessellated for itself and equals a
-single-view frame of its camera. More: the program gets a geometry stage after the evaluation
-stage, which then hands on world-space vertices; an instanced geometry shader
+all views is uploaded once and drawn ``TessSettings.views_per_pass`` views a pass. One (the
+default): each view is a pass of the single-view program into the single-view targets, resolved
+and read back before the next, so each view is tessellated for itself and equals a single-view
+frame of its camera. More: the views are drawn into layered targets (``LayeredGLTargets``, a
+layer per view) by a program with a geometry stage after the evaluation stage, which then hands
+on world-space vertices; an instanced geometry shader
 (``kernels/tess/tess_geometry.glsl``, up to 32 invocations, GL's guaranteed minimum) projects each
 triangle into one view per invocation, drops it where it lies outside that view's frustum and
 picks the view's layer, and more views than that take several passes (view chunks); the views
@@ -84,9 +85,9 @@ class TessSettings:
     domain), which covers T-junctions between patches of different size.
 
     ``views_per_pass`` (multi-view frames): the views one pass of the pipeline draws. 1: a pass
-    per view, the single-view program drawing into that view's layer (each view tessellated for
-    itself, so it equals a single-view frame of its camera). 2..32: a geometry stage draws that
-    many views a pass, the views sharing one tessellation whose levels are the largest any view
+    per view, the single-view program drawing into the single-view targets (each view tessellated
+    for itself, so it equals a single-view frame of its camera). 2..32: a geometry stage draws that
+    many views a pass into layered targets, the views sharing one tessellation whose levels are the largest any view
     needs (thesis chapter 2 found 4 best on consumer NVIDIA GPUs). On the H200 a pass per view
     was the fastest in every case measured (1080p, 2, 6 and 48 views): its draw 2.5x to 7x faster
     than the geometry stage's for a sphere, 1.9x to 2.4x for 19,600 glyphs.
@@ -359,7 +360,13 @@ class TessRenderer:
         ``threshold``: the effective LOD thresholds (t_u, t_v) in output pixels that made the list,
         used by adaptive levels; default 84 px divided by ``lod_divisor`` of the AA mode.
         """
-        settings, render_list, n, req, aa, notes, (tu, tv) = self._inputs(render_list, n, scene, settings, threshold)
+        return self._draw_one(self._inputs(render_list, n, scene, settings, threshold), scene, camera)
+
+    def _draw_one(self, checked, scene, camera, upload: bool = True) -> Frame:
+        """``draw`` with checked inputs (``_inputs``); ``upload``: send the render list and the
+        scene's data first (a multi-view frame sends them for its first view only)."""
+        settings, render_list, n, req, aa, notes, (tu, tv) = checked
+        notes = list(notes)   # this draw's own (a multi-view frame draws several)
         ctx = self.ctx
         t0 = time.perf_counter()
         prog = build_programs(ctx, self.functions, settings.spacing)
@@ -367,7 +374,8 @@ class TessRenderer:
         w, h = camera.size
         tg = self._targets_for((w, h), aa.ss, aa.msaa)
         t1 = time.perf_counter()
-        self._upload(render_list, n, scene)
+        if upload:
+            self._upload(render_list, n, scene)
         t2 = time.perf_counter()
 
         set_uniform(prog, "u_view", gl_matrix(camera.view))
@@ -411,10 +419,9 @@ class TessRenderer:
     def draw_views(self, render_list: np.ndarray, n: int | None, scene: Scene, views,
                    settings: TessSettings | None = None, threshold=None) -> list[Frame]:
         """Draw ``n`` records of ``render_list`` (one LOD pass's list for all views) into every
-        view of ``views`` (a Views, or Cameras of one size), layer by layer of one set of layered
-        targets: one Frame per view, in order. ``settings.views_per_pass`` picks how (see
-        TessSettings): a pass of the single-view program per view, or geometry-stage passes of
-        up to 32 views each.
+        view of ``views`` (a Views, or Cameras of one size): one Frame per view, in order.
+        ``settings.views_per_pass`` picks how (see TessSettings): a pass of the single-view
+        program per view, or geometry-stage passes of up to 32 views each into layered targets.
 
         Each Frame's stats are ``draw``'s, with ``view`` (its index), ``views`` (their count),
         its own ``pixels_written`` and ``view_ms`` (its resolve and readback), and with a pass
@@ -424,43 +431,36 @@ class TessRenderer:
         ``nan_vertices`` (over all passes) and ``ms`` are the whole frame's.
         """
         views = as_views(views)
-        settings, render_list, n, req, aa, notes, (tu, tv) = self._inputs(render_list, n, scene, settings, threshold)
+        checked = self._inputs(render_list, n, scene, settings, threshold)
+        settings, render_list, n, req, aa, notes, (tu, tv) = checked
         ctx = self.ctx
         n_views = len(views)
-        t0 = time.perf_counter()
         invocations, passes = view_chunks(n_views, min(settings.views_per_pass, self.max_invocations))
-        prog = build_programs(ctx, self.functions, settings.spacing, invocations if invocations > 1 else 0)
+        if invocations == 1:
+            return self._views_one_by_one(checked, scene, views)
+        t0 = time.perf_counter()
+        prog = build_programs(ctx, self.functions, settings.spacing, invocations)
         resolve_program(ctx, aa.ss, aa.msaa, layered=True)
         w, h = views.size
         tg = self._layered_for((w, h), aa.ss, aa.msaa, n_views)
         t1 = time.perf_counter()
         self._upload(render_list, n, scene)
-        if invocations > 1:
-            records = np.zeros((MAX_VIEWS, VIEW_FLOATS), np.float32)
-            for v, cam in enumerate(views):
-                records[v, :16] = gl_matrix(cam.view).reshape(-1)
-                records[v, 16:32] = gl_matrix(cam.projection).reshape(-1)
-                records[v, 32] = cam.near
-            self._views.write(records.tobytes())
+        records = np.zeros((MAX_VIEWS, VIEW_FLOATS), np.float32)
+        for v, cam in enumerate(views):
+            records[v, :16] = gl_matrix(cam.view).reshape(-1)
+            records[v, 16:32] = gl_matrix(cam.projection).reshape(-1)
+            records[v, 32] = cam.near
+        self._views.write(records.tobytes())
         t2 = time.perf_counter()
 
         self._set_uniforms(prog, settings, (w, h), (tu, tv))
         tg.begin()
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
-        if invocations == 1:
-            def one_view(v):   # the single-view program, drawing into layer v
-                cam = views[v]
-                tg.use_layer(v)
-                set_uniform(prog, "u_view", gl_matrix(cam.view))
-                set_uniform(prog, "u_proj", gl_matrix(cam.projection))
-                set_uniform(prog, "u_near", float(cam.near))
-            queries, draw_calls = self._draw_list(prog, n, settings, range(n_views), one_view)
-        else:
-            set_uniform(prog, "u_n_views", n_views)
-            self._views.bind_to_uniform_block(0)
-            queries, draw_calls = self._draw_list(prog, n, settings, range(0, n_views, invocations),
-                                                  lambda base: set_uniform(prog, "u_view_base", base))
+        set_uniform(prog, "u_n_views", n_views)
+        self._views.bind_to_uniform_block(0)
+        queries, draw_calls = self._draw_list(prog, n, settings, range(0, n_views, invocations),
+                                              lambda base: set_uniform(prog, "u_view_base", base))
         ctx.finish()
         t3 = time.perf_counter()
 
@@ -485,11 +485,8 @@ class TessRenderer:
             written = int(np.count_nonzero(np.isfinite(depth)))
             t6 = time.perf_counter()   # readback, as draw's: to host arrays, and the pixels counted
             frames.append(frame)
-            own = {"view": v, "pixels_written": written,
-                   "view_ms": {"resolve": (t5 - t4) * 1e3, "readback": (t6 - t5) * 1e3}}
-            if invocations == 1:
-                own["view_triangles"] = drawn[v] if n else 0
-            per_view.append(own)
+            per_view.append({"view": v, "pixels_written": written,
+                             "view_ms": {"resolve": (t5 - t4) * 1e3, "readback": (t6 - t5) * 1e3}})
         t7 = time.perf_counter()
         ms = {"setup": (t1 - t0) * 1e3, "render_list_upload": (t2 - t1) * 1e3, "draw": (t3 - t2) * 1e3,
               "resolve": sum(p["view_ms"]["resolve"] for p in per_view),
@@ -497,6 +494,25 @@ class TessRenderer:
         shared["msaa_samples_device"] = device_samples
         for frame, own in zip(frames, per_view):
             frame.stats = dict(shared, **own, warnings=list(notes), ms=dict(ms))
+        return frames
+
+    def _views_one_by_one(self, checked, scene, views) -> list[Frame]:
+        """A pass of the single-view program per view, each drawn into the single-view targets,
+        resolved and read back before the next; the render list and the scene's data are sent
+        once. (A pass per view into layered targets made the multi-view frame slower than
+        separate frames on the H200, 0.2-0.56x of their speed, where only the LOD stage and the
+        render list's transfer differ between the two.)"""
+        frames = [self._draw_one(checked, scene, cam, upload=v == 0) for v, cam in enumerate(views)]
+        ms = {k: sum(f.stats["ms"][k] for f in frames) for k in frames[0].stats["ms"]}
+        shared = {"views": len(frames), "views_per_pass": 1, "passes": len(frames),
+                  "triangles": sum(f.stats["triangles"] for f in frames),
+                  "draw_calls": sum(f.stats["draw_calls"] for f in frames),
+                  # zeroed with the upload, so the last view's count is every pass's
+                  "nan_vertices": frames[-1].stats["nan_vertices"]}
+        for v, f in enumerate(frames):
+            own = f.stats["ms"]
+            f.stats.update(shared, view=v, view_triangles=f.stats["triangles"], ms=dict(ms),
+                           view_ms={"resolve": own["resolve"], "readback": own["readback"]})
         return frames
 
 
