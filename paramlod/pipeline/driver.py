@@ -281,8 +281,8 @@ def render_views(scene: Scene, cameras, variant: str | None = None, settings: Re
     ``cube_faces``, ``quilt``) from one LOD pass; returns one Frame per camera.
 
     A patch (or mesh cluster, or surfel prefix) is refined as far as the view that needs most
-    asks, and culled only when no view sees it; every renderer then amplifies per view at its
-    last stage. ``frame.stats["view"]`` is its index; LOD, sample and time figures are those of
+    asks, and culled only when no view sees it; every renderer then draws that shared result into
+    each view (docs/multiview.md). ``frame.stats["view"]`` is its index; LOD, sample and time figures are those of
     the whole multi-view frame, ``pixels_written`` the view's own."""
     return PIPELINE.render_views(scene, cameras, variant, settings, time)
 
