@@ -14,6 +14,7 @@ import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
+from paramlod.device.programs import compiling_now
 from paramlod.errors import ParamlodError
 
 MAX_SIDE = 16384   # the largest image side any command renders (scene files share the limit)
@@ -120,7 +121,8 @@ PROGRESS_ENV = "PARAMLOD_PROGRESS"   # "1": show progress even when stderr is no
 def progress(stage: str, delay: float = 2.0, stream=None):
     """A spinner with ``stage`` and the seconds spent, on stderr, for a step that takes longer than
     ``delay`` seconds (quick steps print nothing); on a terminal only, unless PARAMLOD_PROGRESS=1.
-    The line is erased when the step ends, so the command's own output stays as it was."""
+    While an OpenCL compile runs (a first run), the line says so. The line is erased when the step
+    ends, so the command's own output stays as it was."""
     stream = stream or sys.stderr
     mode = os.environ.get(PROGRESS_ENV, "")
     show = mode == "1" or (mode != "0" and getattr(stream, "isatty", lambda: False)())
@@ -129,15 +131,18 @@ def progress(stage: str, delay: float = 2.0, stream=None):
         return
     stop = threading.Event()
     start = time.monotonic()
-    shown = []
+    widths = [0]   # the widths of the lines the spinner drew
 
     def spin():
         if stop.wait(delay):
             return
         for k in range(1 << 62):
-            stream.write(f"\r{SPINNER[k % 4]} {stage} ... {time.monotonic() - start:.0f} s ")
+            what = compiling_now()
+            note = f" (compiling OpenCL: {what}; the driver caches it for later runs)" if what else ""
+            line = f"\r{SPINNER[k % 4]} {stage}{note} ... {time.monotonic() - start:.0f} s "
+            stream.write(line + " " * max(0, widths[-1] - len(line)))   # blank what a longer line left
+            widths.append(len(line))
             stream.flush()
-            shown.append(True)
             if stop.wait(0.25):
                 return
 
@@ -148,8 +153,9 @@ def progress(stage: str, delay: float = 2.0, stream=None):
     finally:
         stop.set()
         thread.join()
-        if shown:
-            stream.write(f"\r{stage}: {time.monotonic() - start:.1f} s" + " " * 12 + "\n")
+        if len(widths) > 1:
+            done = f"\r{stage}: {time.monotonic() - start:.1f} s"
+            stream.write(done + " " * max(12, widths[-1] - len(done)) + "\n")
             stream.flush()
 
 

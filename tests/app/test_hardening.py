@@ -341,6 +341,42 @@ def test_progress_shows_the_stage_of_a_long_step(monkeypatch):
     assert piped.getvalue() == ""
 
 
+def test_progress_says_when_an_opencl_compile_runs(monkeypatch):
+    """A first run waits for the OpenCL compiler: the progress line names what it compiles, and
+    the note goes when the compile ends, also when it fails."""
+    import threading
+    import time
+
+    import pyopencl as cl
+
+    from paramlod.device import programs
+
+    monkeypatch.setenv(cli_args.PROGRESS_ENV, "1")
+    real_build = cl.Program.build
+    seen = []
+
+    def slow_build(self, *a, **kw):
+        seen.append(programs.compiling_now())
+        time.sleep(0.6)   # a compile the spinner sees
+        return real_build(self, *a, **kw)
+
+    monkeypatch.setattr(cl.Program, "build", slow_build)
+    buf = io.StringIO()
+    with cli_args.progress("rendering 48x36", delay=0.0, stream=buf):
+        t = threading.Thread(target=programs.build, args=(["common/keys.cl"],), kwargs={"defines": {"PL_UNIQUE": 7}})
+        t.start()
+        t.join()
+        time.sleep(0.3)
+    text = buf.getvalue()
+    assert seen == ["common/keys.cl"]
+    assert "compiling OpenCL: common/keys.cl; the driver caches it" in text
+    assert text.rstrip().endswith("s") and "compiling" not in text.splitlines()[-1].split("\r")[-1]
+    assert programs.compiling_now() is None
+    with pytest.raises(pl.FunctionError):   # a failed compile clears the note too
+        programs.build(["common/keys.cl"], defines={"PL_BROKEN": 1}, generated="this is not OpenCL;")
+    assert programs.compiling_now() is None
+
+
 def test_a_bench_row_says_what_it_ran():
     assert bench._row_label("tess-4xSS+8xMS", {"aa_effective": "4xSS+4xMS"}) == "tess-4xSS+8xMS (ran 4xSS+4xMS)"
     assert bench._row_label("tess-4xSS+8xMS", {"aa_effective": "4xSS+8xMS"}) == "tess-4xSS+8xMS"
