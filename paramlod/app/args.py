@@ -134,8 +134,10 @@ def progress(stage: str, delay: float = 2.0, stream=None):
     widths = [0]   # the widths of the lines the spinner drew
 
     def spin():
-        if stop.wait(delay):
-            return
+        # quiet for ``delay`` seconds, or half a second once a compile is what the step waits for
+        while time.monotonic() - start < (min(delay, 0.5) if compiling_now() else delay):
+            if stop.wait(0.05):
+                return
         for k in range(1 << 62):
             what = compiling_now()
             note = f" (compiling OpenCL: {what}; the driver caches it for later runs)" if what else ""
