@@ -127,20 +127,22 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
 }
 
 // The decision for one measured patch: cull, render (or force out on the last step), or split
-// into 2, 3 or 4 children by the 7 patterns. seen: some view sees the patch; the measures are the
+// into 2, 3 or 4 children by the 7 patterns. seen: the views that see the patch (bit v: view v;
+// none: culled), written beside the render patch (render_views) so that the renderers skip the
+// views it is outside of; the measures are the
 // maxima over the views that see it: eu, ev: the four u- and v-polyline lengths; mixed: the 8
 // lines (u then v) that have both bad and good samples (in some view), split like a long line;
 // mu_seg, mv_seg: their longest segments; w_u, w_v: 7 x those raised to the boundary lines' need;
 // box: the union of those views' screen bounding boxes.
 inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const bool* mixed,
-                       float mu_seg, float mv_seg, float w_u, float w_v, float4 box, bool seen, __global EvalPatch* out, uint out_cap,
-                       __global RenderPatch* render, uint render_cap,
+                       float mu_seg, float mv_seg, float w_u, float w_v, float4 box, ulong seen, __global EvalPatch* out, uint out_cap,
+                       __global RenderPatch* render, __global ulong* render_views, uint render_cap,
                        __global uint* counters, __global uint* render_count,
                        float t_u, float t_v, uint step, uint force)
 {
     uint inst = patch.inst;
     float u0 = patch.range.x, u1 = patch.range.y, v0 = patch.range.z, v1 = patch.range.w;
-    if (!seen) { atomic_inc(&counters[LOD_CULLED]); return; }  // in every view all samples outside one clip plane
+    if (seen == 0ul) { atomic_inc(&counters[LOD_CULLED]); return; }  // in every view all samples outside one clip plane
 
     bool a = eu[0] > t_u || eu[1] > t_u || mixed[0] || mixed[1];   // u-lines in the lower v half
     bool b = eu[2] > t_u || eu[3] > t_u || mixed[2] || mixed[3];   // u-lines in the upper v half
@@ -161,6 +163,7 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
             r.flags = step | (split ? FLAG_FORCED : 0u);
             r.w = (float2)(w_u, w_v);
             render[slot] = r;
+            render_views[slot] = seen;
         }
         atomic_inc(&counters[LOD_RENDERED]);
         if (split) atomic_inc(&counters[LOD_FORCED]);
@@ -241,8 +244,9 @@ inline float box_float(int k) {
 // The measures over the views that see the patch (local, reduced with atomics): 0..7 each line's
 // length, 8, 9 the longest u- and v-segment, 10, 11 w_u, w_v (float bits: maxima of floats >= 0 are
 // maxima of their bits, and one view's own value), 12 the mixed lines (bit k: line k), 13..16 the
-// screen box (box_key: min x, min y, max x, max y), 17 some view sees the patch.
-#define COMB 18
+// screen box (box_key: min x, min y, max x, max y), 17, 18 the views that see the patch (bit v of
+// their 64: view v).
+#define COMB 19
 
 // One LOD step: a work-group of LOD_GROUP work-items measures one patch at a time (a patch's
 // samples are the expensive part, and a step with a few hundred patches would leave most of a GPU
@@ -266,7 +270,7 @@ inline float box_float(int k) {
 // view). Local memory: 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views.
 __kernel __attribute__((reqd_work_group_size(LOD_GROUP, 1, 1)))
 void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
-              __global RenderPatch* render, uint render_cap,
+              __global RenderPatch* render, __global ulong* render_views, uint render_cap,
               __global uint* counters,   // per step: LOD_COUNTERS uints; see paramlod/lod/stage.py
               __global const float* inst_f, __global const uint* inst_u,
               __global const float* params, __global const float* cam, uint n_views,
@@ -374,7 +378,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                     float4 b = box_part[l];
                     atomic_min((__local int*)&comb[13], box_key(b.x)); atomic_min((__local int*)&comb[14], box_key(b.y));
                     atomic_max((__local int*)&comb[15], box_key(b.z)); atomic_max((__local int*)&comb[16], box_key(b.w));
-                    atomic_or(&comb[17], 1u);
+                    atomic_or(&comb[17u + ((c0 + l) >> 5)], 1u << ((c0 + l) & 31u));
                 }
             }
             barrier(CLK_LOCAL_MEM_FENCE);   // the next chunk overwrites pos, state and the parts
@@ -400,8 +404,8 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
             float4 box = (float4)(box_float((int)comb[13]), box_float((int)comb[14]),
                                   box_float((int)comb[15]), box_float((int)comb[16]));
             lod_decide(patch, eu, ev, mixed, as_float(comb[8]), as_float(comb[9]),
-                       as_float(comb[10]), as_float(comb[11]), box, comb[17] != 0u, out, cap, render,
-                       render_cap, c, render_count, t_u, t_v, step, force);
+                       as_float(comb[10]), as_float(comb[11]), box, (ulong)comb[17] | ((ulong)comb[18] << 32),
+                       out, cap, render, render_views, render_cap, c, render_count, t_u, t_v, step, force);
         }
         // no barrier here: the next patch clears the other set of comb
     }

@@ -244,7 +244,8 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
                    uint count_at, uint capacity, __global const ulong* order,
                    __global const float* inst_f, __global const uint* inst_u,
                    __global const float* params, __global const float4* materials,
-                   __global const float* cam, uint n_views, __global const float* light,
+                   __global const float* cam, uint n_views, __global const ulong* view_masks,
+                   __global const float* light,
                    float factor, uint measure, float widen, uint max_side, uint color_by,
                    __global ulong* color_buf, __global ulong* aux_buf,
                    __global ulong* counters   // samples, atomics, NaN samples, capped patches, schedule
@@ -280,6 +281,8 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
             uint object_id = inst_u[inst * INST_U + INST_OBJECT];
             float4 mat = debug_material(materials[inst], rp, color_by);
             PointGrid g = point_grid(rp, I, factor, measure, widen, max_side);
+            // the views that see the patch (the LOD stage's render_views): the others are skipped
+            ulong seen = n_views == 1u ? 1ul : view_masks[pid];
             uint total_here = g.nu * g.nv;
             if (c == first && get_local_id(0) == 0 && (g.nu == max_side || g.nv == max_side)) n_capped++;
             for (; c < min(next, c_end); ++c) {
@@ -294,8 +297,10 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
                 rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;
 #endif
                 if (r == SAMPLE_NAN) { n_nan++; continue; }
-                // one evaluation, shaded and written into every view whose frustum holds it
-                for (uint view = 0; view < n_views; ++view) {
+                // one evaluation, shaded and written into every view that sees the patch and
+                // whose frustum holds the sample
+                for (ulong left = seen; left != 0ul; left &= left - 1ul) {
+                    uint view = 63u - (uint)clz(left & (~left + 1ul));   // the lowest view left
                     float fx, fy;
                     ulong key, aux;
                     if (point_view(world, n_obj, cam + view * CAM_FLOATS, mat, light, object_id,

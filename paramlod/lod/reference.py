@@ -153,9 +153,9 @@ def _most(x, seen):
     return np.where(seen, bits, np.uint32(0)).max(axis=0).view(np.float32)
 
 
-def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
-    """One PATCH SUBDIVISION step; ``cam``: one or more camera records (``camera_rows``).
-    Returns (children, render patches, stats)."""
+def _measure(patches, scene_inst, functions, cam) -> dict:
+    """Every view's measures of ``patches`` (as lod_step's kernel: f once per sample, then every
+    view): a dict of arrays (views, n, ...)."""
     n = len(patches)
     r = patches["range"].astype(np.float32)
     u0, u1, v0, v1 = (r[:, i:i + 1] for i in range(4))
@@ -173,11 +173,29 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
     gv = v0[:, :, None] + dv[:, :, None] * g[None, :, None]          # (n, 5, 1) over j
     gu, gv = np.broadcast_to(gu, (n, 5, 5)), np.broadcast_to(gv, (n, 5, 5))
     ii = np.broadcast_to(inst[:, None, None], (n, 4, 8))
-    # f once per sample, then every view
     world = (_world(scene_inst, functions, ii, ru, rv), _world(scene_inst, functions, ii, cu, cv),
              _world(scene_inst, functions, np.broadcast_to(inst[:, None, None], (n, 5, 5)), gu, gv))
     per_view = [_view_measures(*(_project(w, bad, c) for w, bad in world)) for c in camera_rows(cam)]
-    m = {k: np.stack([pv[k] for pv in per_view]) for k in per_view[0]}   # (views, n, ...)
+    return {k: np.stack([pv[k] for pv in per_view]) for k in per_view[0]}
+
+
+def view_masks(patches, scene_inst, functions, cam) -> np.ndarray:
+    """Twin of the kernel's render_views: per patch the views that see it (uint64, bit v: view
+    v sees it: not all of its samples outside one of v's clip planes)."""
+    if len(patches) == 0:
+        return np.zeros(0, np.uint64)
+    seen = _measure(patches, scene_inst, functions, cam)["code"] == 0     # (views, n)
+    bits = np.uint64(1) << np.arange(len(seen), dtype=np.uint64)
+    return (seen.astype(np.uint64) * bits[:, None]).sum(axis=0, dtype=np.uint64)
+
+
+def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
+    """One PATCH SUBDIVISION step; ``cam``: one or more camera records (``camera_rows``).
+    Returns (children, render patches, stats)."""
+    n = len(patches)
+    r = patches["range"].astype(np.float32)
+    inst = patches["inst"]
+    m = _measure(patches, scene_inst, functions, cam)
 
     seen = m["code"] == 0
     culled = ~seen.any(axis=0)

@@ -109,6 +109,8 @@ class LodStage:
         self._kernels(1)
         self.bufs = [_Buffer(EVAL_DTYPE, 4096), _Buffer(EVAL_DTYPE, 4096)]
         self.render = _Buffer(RENDER_DTYPE, 4096)
+        # beside each render patch: the views that see it (bit v: view v), for renderers that skip the others
+        self.render_views = _Buffer(np.dtype(np.uint64), 4096)
         # PATCH INITIALIZATION's output, built and uploaded only when the instances change
         # (for 358,140 fiber instances that was ~30 ms of numpy and 11 MB of upload a frame)
         self.init = _Buffer(EVAL_DTYPE, 4096)
@@ -177,12 +179,12 @@ class LodStage:
         cap = min(b.capacity for b in self.bufs)
         # the buffers themselves, not their ids: held here, they cannot be freed and their ids reused
         bound = (*inst, cam_buf, int(n_views), float(tu), float(tv), max_steps, cap,
-                 *(b.buf for b in (self.init, *self.bufs, self.render)))
+                 *(b.buf for b in (self.init, *self.bufs, self.render, self.render_views)))
         layout, kernels = self._kernels(n_views)
         if bound != self._bound.get(layout):
             for step, k in enumerate(kernels[:max_steps], start=1):
                 src = self.init if step == 1 else self.bufs[(step - 1) % 2]
-                k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf,
+                k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf, self.render_views.buf,
                            np.uint32(self.render.capacity), self.counters, *inst, cam_buf,
                            np.uint32(n_views), tu, tv,
                            np.uint32(step), np.uint32(step == max_steps))
@@ -238,6 +240,7 @@ class LodStage:
         if n_render > self.render.capacity:
             self._check(n_render, settings, "render patches")
             grew |= self.render.ensure(n_render)
+            self.render_views.ensure(self.render.capacity)
         return grew
 
     def result(self) -> tuple[int, list[dict]]:
@@ -270,6 +273,13 @@ class LodStage:
         out = np.empty(n, RENDER_DTYPE)
         if n:
             cl.enqueue_copy(cl_device().queue, out, self.render.buf)
+        return out
+
+    def read_render_views(self, n) -> np.ndarray:
+        """The views that see each of the first ``n`` render patches (uint64, bit v: view v)."""
+        out = np.empty(n, np.uint64)
+        if n:
+            cl.enqueue_copy(cl_device().queue, out, self.render_views.buf)
         return out
 
 

@@ -43,14 +43,20 @@ class DirectPointRenderer:
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
-                light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1):
+                light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None):
         """Enqueue the render of the ``count_buf[count_at]`` (read on the device, at most
         ``capacity``) patches of ``patches_buf`` without waiting; ``counts()`` reads the counters.
         ``n_views``: camera records in ``cam_buf``, each sample is written into layer v of
-        ``keys`` for every view v whose frustum holds it (``keys.layers`` must be ``n_views``)."""
+        ``keys`` for every view v that sees its patch (``view_masks``: a uint64 per patch, bit v
+        for view v, as LodStage.render_views; needed with several views) and whose frustum holds
+        it (``keys.layers`` must be ``n_views``)."""
         settings.validate()
         if keys.layers != n_views:
             raise ValueError(f"points: {n_views} views need key buffers of {n_views} layers, got {keys.layers}")
+        if view_masks is None:
+            if n_views != 1:
+                raise ValueError(f"points: {n_views} views need the patches' view masks (LodStage.render_views)")
+            view_masks = self.counters   # not read with one view
         q = cl_device().queue
         capacity = max(int(capacity), 1)
         if capacity > self.order_capacity:
@@ -59,7 +65,7 @@ class DirectPointRenderer:
         cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
         sampling = (settings.factor(), settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), self._order,
-                *inst, materials_buf, cam_buf, np.uint32(n_views), light_buf, *sampling, np.float32(settings.widen),
+                *inst, materials_buf, cam_buf, np.uint32(n_views), view_masks, light_buf, *sampling, np.float32(settings.widen),
                 np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)), keys.color, keys.aux,
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
@@ -116,7 +122,7 @@ class DirectPoints:
         self.lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"])
         self.points.enqueue(self.lod.render.buf, self.lod.counters, LOD_RENDER_TOTAL, self.lod.render.capacity,
                             d["inst"], d["materials"], d["cam"], d["light"], target, settings.points,
-                            n_views=d["n_views"])
+                            n_views=d["n_views"], view_masks=self.lod.render_views.buf)
 
     def collect(self):
         self.lod.read_counters(wait=False)

@@ -281,10 +281,13 @@ class TessRenderer:
             raise SceneError(f"tess threshold must be positive pixels, got {threshold}")
         return settings, render_list, n, req, aa, notes, (tu, tv)
 
-    def _upload(self, render_list, n, scene):
-        """The render list, the scene's instance data (when it changed) and zeroed counters."""
+    def _upload(self, render_list, n, scene, patches_only: bool = False):
+        """The render list, the scene's instance data (when it changed) and zeroed counters
+        (``patches_only``: the render list alone)."""
         # CL -> GL through host memory: the render list records go into the vertex buffer
         self._patches.write(np.ascontiguousarray(render_list[:n]).tobytes())
+        if patches_only:
+            return
         scene_key = (scene._version, scene.time)
         if scene_key != getattr(self, "_scene_key", None):   # instance data only when it changed
             inst_f, inst_u, params = scene.instance_buffers()
@@ -362,9 +365,10 @@ class TessRenderer:
         """
         return self._draw_one(self._inputs(render_list, n, scene, settings, threshold), scene, camera)
 
-    def _draw_one(self, checked, scene, camera, upload: bool = True) -> Frame:
-        """``draw`` with checked inputs (``_inputs``); ``upload``: send the render list and the
-        scene's data first (a multi-view frame sends them for its first view only)."""
+    def _draw_one(self, checked, scene, camera, upload="all") -> Frame:
+        """``draw`` with checked inputs (``_inputs``); ``upload``: "all" (the render list, the
+        scene's data, zeroed counters), "patches" (the render list alone) or None (what the last
+        draw sent): a multi-view frame sends the scene's data for its first view only."""
         settings, render_list, n, req, aa, notes, (tu, tv) = checked
         notes = list(notes)   # this draw's own (a multi-view frame draws several)
         ctx = self.ctx
@@ -375,7 +379,7 @@ class TessRenderer:
         tg = self._targets_for((w, h), aa.ss, aa.msaa)
         t1 = time.perf_counter()
         if upload:
-            self._upload(render_list, n, scene)
+            self._upload(render_list, n, scene, patches_only=upload == "patches")
         t2 = time.perf_counter()
 
         set_uniform(prog, "u_view", gl_matrix(camera.view))
@@ -417,11 +421,13 @@ class TessRenderer:
         return frame
 
     def draw_views(self, render_list: np.ndarray, n: int | None, scene: Scene, views,
-                   settings: TessSettings | None = None, threshold=None) -> list[Frame]:
+                   settings: TessSettings | None = None, threshold=None, view_masks=None) -> list[Frame]:
         """Draw ``n`` records of ``render_list`` (one LOD pass's list for all views) into every
         view of ``views`` (a Views, or Cameras of one size): one Frame per view, in order.
         ``settings.views_per_pass`` picks how (see TessSettings): a pass of the single-view
         program per view, or geometry-stage passes of up to 32 views each into layered targets.
+        ``view_masks``: the views that see each patch (uint64, bit v: view v; the LOD stage's
+        ``read_render_views``): with a pass per view, each view draws only the patches it sees.
 
         Each Frame's stats are ``draw``'s, with ``view`` (its index), ``views`` (their count),
         its own ``pixels_written`` and ``view_ms`` (its resolve and readback), and with a pass
@@ -437,7 +443,7 @@ class TessRenderer:
         n_views = len(views)
         invocations, passes = view_chunks(n_views, min(settings.views_per_pass, self.max_invocations))
         if invocations == 1:
-            return self._views_one_by_one(checked, scene, views)
+            return self._views_one_by_one(checked, scene, views, view_masks)
         t0 = time.perf_counter()
         prog = build_programs(ctx, self.functions, settings.spacing, invocations)
         resolve_program(ctx, aa.ss, aa.msaa, layered=True)
@@ -496,18 +502,29 @@ class TessRenderer:
             frame.stats = dict(shared, **own, warnings=list(notes), ms=dict(ms))
         return frames
 
-    def _views_one_by_one(self, checked, scene, views) -> list[Frame]:
+    def _views_one_by_one(self, checked, scene, views, view_masks=None) -> list[Frame]:
         """A pass of the single-view program per view, each drawn into the single-view targets,
-        resolved and read back before the next; the render list and the scene's data are sent
-        once. (A pass per view into layered targets made the multi-view frame slower than
-        separate frames on the H200, 0.2-0.56x of their speed, where only the LOD stage and the
-        render list's transfer differ between the two.)"""
-        frames = [self._draw_one(checked, scene, cam, upload=v == 0) for v, cam in enumerate(views)]
+        resolved and read back before the next; the scene's data are sent once. ``view_masks``
+        (the LOD stage's render_views): each view draws only the patches it sees, so a cube face
+        tessellates its own side. (A pass per view into layered targets made the multi-view
+        frame slower than separate frames on the H200, 0.2-0.56x of their speed.)"""
+        settings, render_list, n, req, aa, notes, thr = checked
+        frames, sent = [], None
+        for v, cam in enumerate(views):
+            sel = slice(None) if view_masks is None else ((view_masks[:n] >> np.uint64(v)) & np.uint64(1)).astype(bool)
+            if not isinstance(sel, slice) and sel.all():
+                sel = slice(None)
+            own = render_list[:n] if isinstance(sel, slice) else render_list[:n][sel]
+            key = "all" if isinstance(sel, slice) else v
+            upload = "all" if sent is None else None if key == sent else "patches"
+            frames.append(self._draw_one((settings, own, len(own), req, aa, notes, thr), scene, cam, upload))
+            frames[-1].stats["view_patches"] = len(own)
+            sent = key
         ms = {k: sum(f.stats["ms"][k] for f in frames) for k in frames[0].stats["ms"]}
-        shared = {"views": len(frames), "views_per_pass": 1, "passes": len(frames),
+        shared = {"views": len(frames), "views_per_pass": 1, "passes": len(frames), "render_patches": n,
                   "triangles": sum(f.stats["triangles"] for f in frames),
                   "draw_calls": sum(f.stats["draw_calls"] for f in frames),
-                  # zeroed with the upload, so the last view's count is every pass's
+                  # zeroed with the first upload, so the last view's count is every pass's
                   "nan_vertices": frames[-1].stats["nan_vertices"]}
         for v, f in enumerate(frames):
             own = f.stats["ms"]
@@ -550,10 +567,12 @@ class Tessellation:
             _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], settings.lod, t_div=div)
         t1 = time.perf_counter()
         records = self.lod.read_render_list(n)
+        masks = self.lod.read_render_views(n) if multi else None   # the views that see each patch
         t2 = time.perf_counter()
         tu, tv = (t / div for t in settings.lod.threshold)
         if multi:
-            frames = self.tess.draw_views(records, n, self.scene, camera, settings.tess, threshold=(tu, tv))
+            frames = self.tess.draw_views(records, n, self.scene, camera, settings.tess, threshold=(tu, tv),
+                                          view_masks=masks)
         else:
             frames = [self.tess.draw(records, n, self.scene, camera, settings.tess, threshold=(tu, tv))]
         t3 = time.perf_counter()

@@ -9,7 +9,7 @@ import paramlod as pl
 from paramlod.core.layouts import camera_record
 from paramlod.core.views import Views, cube_faces, quilt, stereo
 from paramlod.lod.patches import EVAL_DTYPE, FLAG_FORCED, initial_patches, sort_key
-from paramlod.lod.reference import lod_step, run_lod
+from paramlod.lod.reference import lod_step, run_lod, view_masks
 from helpers.stages import ParametricStage
 
 SIZE = (160, 120)
@@ -83,6 +83,30 @@ def test_multi_view_kernel_matches_numpy_twin(name):
     # the twin takes the records as rows too
     ref2, _ = run_lod(scene, records(cams).reshape(len(cams), -1), lod)
     assert ref2.tobytes() == ref.tobytes()
+
+
+@pytest.mark.parametrize("name", ["cube faces outside", "disjoint objects", "one view sees nothing", "64 views"])
+def test_each_render_patch_names_the_views_that_see_it(name):
+    """render_views, beside the render list: bit v set where view v sees the patch (kernel ==
+    twin exactly); every patch is seen by some view, and a cube face sees only its own side."""
+    make, cams = camera_sets()[name]
+    scene = make()
+    lod = pl.LodSettings(threshold=(24.0, 24.0))
+    stage = ParametricStage(scene)
+    dev = stage.upload(scene, Views(cams))
+    _, n, _, _ = stage.lod.run(dev["inst"], dev["domains"], dev["cam"], lod, n_views=dev["n_views"])
+    got, masks = stage.lod.read_render_list(n), stage.lod.read_render_views(n)
+    ref = view_masks(got, scene.instance_buffers(), scene.functions(), records(cams))
+    np.testing.assert_array_equal(masks, ref)
+    assert np.all(masks != 0) and np.all(masks >> np.uint64(len(cams)) == 0)
+    per_view = [(masks >> np.uint64(v)) & np.uint64(1) for v in range(len(cams))]
+    if name == "cube faces outside":       # the object lies in front of one face, or near its edges
+        assert max(int(p.sum()) for p in per_view) > 2 * np.median([int(p.sum()) for p in per_view])
+    if name == "one view sees nothing":
+        assert int(per_view[1].sum()) == 0 and int(per_view[0].sum()) == n
+    best = cams[int(np.argmax([int(p.sum()) for p in per_view]))]
+    _, n1, _, _ = stage.lod.run(dev["inst"], dev["domains"], stage.upload(scene, best)["cam"], lod)
+    assert n1 and np.all(stage.lod.read_render_views(n1) == 1)   # one view: it sees every patch
 
 
 def test_a_view_that_sees_nothing_changes_nothing():
