@@ -97,6 +97,14 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
 class _Outputs:
     """The single-sampled output targets at ``size`` the resolve draws into, and their readback."""
 
+    def _failed(self, exc: Exception, what: str):
+        """Release what a constructor made before ``exc``, then raise it as a DeviceError naming
+        ``what`` (a DeviceError as it is; moderngl.Error: out of memory, an unsupported format)."""
+        self.release()
+        if isinstance(exc, DeviceError):
+            raise exc
+        raise DeviceError(f"could not create the {what}: {exc}") from None
+
     def _outputs(self, prog):
         ctx, size = self.ctx, self.size
         self.out_color = ctx.texture(size, 4, dtype="f4")
@@ -156,13 +164,8 @@ class GLTargets(_Outputs):
             for t in single:
                 t.filter = (ctx.NEAREST, ctx.NEAREST)
             self._outputs(resolve_program(ctx, ss, samples))
-        except DeviceError:
-            self.release()
-            raise
-        except Exception as exc:  # moderngl.Error: out of memory, unsupported format
-            self.release()
-            raise DeviceError(f"could not create the {what} render targets ({w}x{h}, {ss}x{ss} SS, "
-                              f"{samples} samples): {exc}") from None
+        except Exception as exc:
+            self._failed(exc, f"{what} render targets ({w}x{h}, {ss}x{ss} SS, {samples} samples)")
 
     def begin(self):
         """Bind the targets for drawing and clear them (colour and depth only; see CLEAR_MASK)."""
@@ -306,13 +309,8 @@ class LayeredGLTargets(_Outputs):
             if err:
                 raise DeviceError(f"could not create the {what} render targets ({w}x{h}, {ss}x{ss} SS, {samples} "
                                   f"samples, {layers} layers): OpenGL error 0x{err:04x} (0x0505: out of memory)")
-        except DeviceError:
-            self.release()
-            raise
-        except Exception as exc:  # moderngl.Error: out of memory, unsupported format
-            self.release()
-            raise DeviceError(f"could not create the {what} render targets ({w}x{h}, {ss}x{ss} SS, "
-                              f"{samples} samples, {layers} layers): {exc}") from None
+        except Exception as exc:
+            self._failed(exc, f"{what} render targets ({w}x{h}, {ss}x{ss} SS, {samples} samples, {layers} layers)")
 
     def _array(self, fmt: int) -> int:
         gl, (bw, bh) = self.gl, self.big
