@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod.core.camera import Camera
-from paramlod.core.layouts import CAMERA, camera_record
+from paramlod.core.layouts import camera_record
 from paramlod.errors import SceneError
 
 # views of one frame: the GL path draws up to 32 per geometry-shader invocation set and chunks
@@ -62,14 +62,6 @@ class Views:
     def height(self) -> int:
         return self.size[1]
 
-    @property
-    def near(self) -> float:
-        return min(c.near for c in self.cameras)
-
-    @property
-    def far(self) -> float:
-        return max(c.far for c in self.cameras)
-
     def with_size(self, size) -> "Views":
         return Views([c.with_size(size) for c in self.cameras])
 
@@ -82,9 +74,6 @@ class Views:
 def as_views(camera) -> Views:
     """A Views of a Camera (one view) or of a Views / list of cameras."""
     return camera if isinstance(camera, Views) else Views(camera)
-
-
-RECORD_FLOATS = CAMERA.length
 
 
 def _axes(camera: Camera):
@@ -237,4 +226,4 @@ def strip_image(frames) -> np.ndarray:
 
 
 __all__ = ["MAX_VIEWS", "Views", "as_views", "stereo", "cube_faces", "equirect", "quilt", "quilt_image",
-           "strip_image", "parse_grid", "RECORD_FLOATS"]
+           "strip_image", "parse_grid"]

@@ -209,16 +209,23 @@ def select_views(arrays, instances, cameras, threshold_px, cull_frustum=True, cu
                 if cull_backface else np.zeros(draw.shape, bool)
             mask |= np.where(~outside & ~back, np.uint64(1 << v), np.uint64(0))
             all_outside &= outside
-        dropped = draw & (mask == 0)
-        counts["culled_frustum"] += int((dropped & all_outside).sum())
-        counts["culled_backface"] += int((dropped & ~all_outside).sum())
-        draw &= ~dropped
-        ii, cc_ = np.nonzero(draw)
-        counts["selected"] += len(ii)
-        counts["triangles"] += int(cl["count"][cc_].astype(np.int64).sum())
-        pairs.append(np.stack([ii + i0, cc_ + c0], axis=1).astype(np.uint32))
-        masks.append(mask[ii, cc_])
+        append_selected(draw, mask, all_outside, cl["count"], i0, c0, counts, pairs, masks)
     return sort_views(pairs, masks, counts, len(ccs), arrays.clusters["count"])
+
+
+def append_selected(draw, mask, all_outside, triangles, i0, c0, counts, pairs, masks) -> None:
+    """One batch's selection (instances x clusters from i0, c0): the pairs to draw (``draw`` and
+    seen by some view of ``mask``) and their view masks appended, the culled ones counted as
+    frustum-culled (``all_outside``: outside every view) or back-face-culled; ``triangles`` per
+    cluster of the batch. Shared with the skinned cull's twin."""
+    dropped = draw & (mask == 0)
+    counts["culled_frustum"] += int((dropped & all_outside).sum())
+    counts["culled_backface"] += int((dropped & ~all_outside).sum())
+    ii, cc_ = np.nonzero(draw & ~dropped)
+    counts["selected"] += len(ii)
+    counts["triangles"] += int(np.asarray(triangles)[cc_].astype(np.int64).sum())
+    pairs.append(np.stack([ii + i0, cc_ + c0], axis=1).astype(np.uint32))
+    masks.append(mask[ii, cc_])
 
 
 def sort_views(pairs, masks, counts, n_views, cluster_counts):

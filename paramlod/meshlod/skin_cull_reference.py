@@ -36,7 +36,8 @@ import numpy as np
 from paramlod.core.layouts import INSTANCE_F
 from paramlod.core.views import as_views
 from paramlod.errors import MeshError
-from paramlod.meshlod.cut_reference import CC_EYE, COUNTERS, cut_camera, planes_outside, sort_views
+from paramlod.meshlod.cut_reference import (CC_EYE, COUNTERS, append_selected, cut_camera, planes_outside,
+                                           sort_views)
 
 SLACK = 2.0 ** -12
 _F = np.float32
@@ -162,15 +163,7 @@ def select_views(bounds_list, slots, instances, skin, cameras, cull_frustum=True
                     if cull_backface else np.zeros((ni, nc), bool)
                 mask &= np.where(outside | back, ~np.uint64(1 << v), ~np.uint64(0))
                 all_outside &= outside
-            dropped = draw & (mask == 0)
-            counts["culled_frustum"] += int((dropped & all_outside).sum())
-            counts["culled_backface"] += int((dropped & ~all_outside).sum())
-            draw &= ~dropped
-            ii, cc_ = np.nonzero(draw)
-            counts["selected"] += len(ii)
-            counts["triangles"] += int(meta[cc_, 2].astype(np.int64).sum())
-            pairs.append(np.stack([ii + i0, cc_ + c0], axis=1).astype(np.uint32))
-            masks.append(mask[ii, cc_])
+            append_selected(draw, mask, all_outside, meta[:, 2], i0, c0, counts, pairs, masks)
     counts_of = np.zeros(max(tris, default=-1) + 1, np.int64)
     counts_of[list(tris)] = list(tris.values())
     return sort_views(pairs, masks, counts, len(ccs), counts_of)

@@ -97,6 +97,17 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
 class _Outputs:
     """The single-sampled output targets at ``size`` the resolve draws into, and their readback."""
 
+    def _release(self, *names):
+        """Release the moderngl objects ``names`` and the output targets, those that were made."""
+        for name in (*names, "resolve_vao", "out_fbo", "color_resolved", "out_color", "out_depth", "out_normal",
+                     "out_object", "samples_buffer"):
+            obj = self.__dict__.pop(name, None)
+            if obj is not None:
+                try:
+                    obj.release()
+                except Exception:
+                    pass
+
     def _failed(self, exc: Exception, what: str):
         """Release what a constructor made before ``exc``, then raise it as a DeviceError naming
         ``what`` (a DeviceError as it is; moderngl.Error: out of memory, an unsupported format)."""
@@ -194,15 +205,7 @@ class GLTargets(_Outputs):
         return int(np.frombuffer(self.samples_buffer.read(8), np.uint32)[1])
 
     def release(self):
-        for name in ("resolve_vao", "fbo", "color_ms_fbo", "color_resolved_fbo", "out_fbo", "color", "depth",
-                     "normal", "object", "zbuf", "color_resolved", "out_color", "out_depth", "out_normal",
-                     "out_object", "samples_buffer"):
-            obj = self.__dict__.pop(name, None)
-            if obj is not None:
-                try:
-                    obj.release()
-                except Exception:
-                    pass
+        self._release("fbo", "color_ms_fbo", "color_resolved_fbo", "color", "depth", "normal", "object", "zbuf")
 
 
 # --- layered targets (multi-view frames) --------------------------------------------------------
@@ -386,14 +389,7 @@ class LayeredGLTargets(_Outputs):
         return int(np.frombuffer(self.samples_buffer.read(8), np.uint32)[1])
 
     def release(self):
-        for name in ("resolve_vao", "out_fbo", "color_resolved", "out_color", "out_depth", "out_normal",
-                     "out_object", "samples_buffer"):
-            obj = self.__dict__.pop(name, None)
-            if obj is not None:
-                try:
-                    obj.release()
-                except Exception:
-                    pass
+        self._release()
         gl = self.__dict__.get("gl")
         if gl is not None:
             for items, delete in ((self._fbos, gl.glDeleteFramebuffers), (self._textures, gl.glDeleteTextures)):

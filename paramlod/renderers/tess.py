@@ -511,11 +511,10 @@ class TessRenderer:
         settings, render_list, n, req, aa, notes, thr = checked
         frames, sent = [], None
         for v, cam in enumerate(views):
-            sel = slice(None) if view_masks is None else ((view_masks[:n] >> np.uint64(v)) & np.uint64(1)).astype(bool)
-            if not isinstance(sel, slice) and sel.all():
-                sel = slice(None)
-            own = render_list[:n] if isinstance(sel, slice) else render_list[:n][sel]
-            key = "all" if isinstance(sel, slice) else v
+            sees = None if view_masks is None else ((view_masks[:n] >> np.uint64(v)) & np.uint64(1)).astype(bool)
+            whole = sees is None or sees.all()
+            own = render_list[:n] if whole else render_list[:n][sees]
+            key = "all" if whole else v   # which list the vertex buffer holds
             upload = "all" if sent is None else None if key == sent else "patches"
             frames.append(self._draw_one((settings, own, len(own), req, aa, notes, thr), scene, cam, upload))
             frames[-1].stats["view_patches"] = len(own)

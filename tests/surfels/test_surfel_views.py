@@ -15,6 +15,7 @@ from paramlod.renderers.shading import LIGHT  # noqa: E402
 from paramlod.renderers.targets import KeyBuffer  # noqa: E402
 from paramlod.surfels import FixedCount, FixedSize, SurfelError, draw_surfels  # noqa: E402
 from paramlod.surfels.build import OrthoCamera  # noqa: E402
+from helpers.surfels import ball  # noqa: E402,F401  (the fixture)
 from paramlod.surfels.build import reference as ref  # noqa: E402
 from paramlod.surfels.render import VIEW_FLOATS, SurfelSplats, _DeviceSurfels  # noqa: E402
 

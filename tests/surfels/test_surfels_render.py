@@ -12,6 +12,7 @@ from paramlod.renderers.shading import LIGHT  # noqa: E402
 from paramlod.surfels import (FixedCount, FixedSize, FrameTimeAdaptive, SurfelError, choose_prefix,  # noqa: E402
                               draw_surfels, render_surfels)
 from paramlod.surfels.build import OrthoCamera  # noqa: E402
+from helpers.surfels import ball  # noqa: E402,F401  (the fixture)
 from paramlod.surfels.build import reference as ref  # noqa: E402
 from paramlod.surfels.render import _DeviceSurfels, draw_records, pixel_world_size  # noqa: E402
 from paramlod.core.transforms import rotate, scale, translate  # noqa: E402
