@@ -130,6 +130,12 @@ class CLPrinter(C99CodePrinter):
             out = f"{self.names[which]}({out}, {a})"
         return out
 
+    def _print__Sqrt(self, expr):
+        return f"{self.names['sqrt']}({self._print(expr.args[0])})"
+
+    def _print__Rsqrt(self, expr):
+        return f"{self.names['rsqrt']}({self._print(expr.args[0])})"
+
     def _print_Min(self, expr):
         return self._minmax(expr, "min")
 
@@ -160,19 +166,175 @@ def param_lines(fn: ParametricFunction, printer: CLPrinter = _printer) -> list[s
             for i, s in enumerate(fn.param_symbols)]
 
 
+# --- lowering: one shared program per call --------------------------------------------------------
+class _Sqrt(sp.Function):
+    """sqrt(x) kept as one node, so that CSE shares it between x**(1/2) and x**(3/2) = x*sqrt(x)."""
+    nargs = 1
+
+
+class _Rsqrt(sp.Function):
+    """1/sqrt(x) as one node: x**(-3/2) = rsqrt(x)**3 shares the rsqrt of x**(-1/2) (the derivative
+    of a normalisation), where ``pow(x, 1.5f)`` in a denominator costs a pow and a division."""
+    nargs = 1
+
+
+def _half_power(p):
+    n = int(p.exp.p)  # exponent n/2, n odd
+    if n > 0:
+        return p.base ** ((n - 1) // 2) * _Sqrt(p.base)
+    return _Rsqrt(p.base) ** (-n)
+
+
+def _prepare(e):
+    """Before CSE: constants as floats (pi*(1/180)*x folds to one literal, pi**-2 to one number)
+    and half-integer powers through sqrt/rsqrt nodes."""
+    consts = {a: sp.Float(a.evalf(20), 20) for a in e.atoms(sp.NumberSymbol)}
+    if consts:
+        e = e.xreplace(consts)
+    return e.replace(lambda x: x.is_Pow and x.exp.is_Rational and x.exp.q == 2, _half_power)
+
+
+class SinCos:
+    """One sincos(arg) that defines both ``s`` = sin(arg) and ``c`` = cos(arg)."""
+    __slots__ = ("s", "c", "arg")
+
+    def __init__(self, s, c, arg):
+        self.s, self.c, self.arg = s, c, arg
+
+
+class Lowered:
+    """What one generated call computes: ``steps`` in order (``(symbol, expr)`` definitions and
+    ``SinCos`` pairs), then ``outputs`` (expressions over the steps' symbols). Printed by
+    ``function_body`` and counted by ``count_flops``, so the count is the count of the printed code."""
+
+    def __init__(self, steps, outputs):
+        self.steps, self.outputs = list(steps), list(outputs)
+
+
+def _lift_power_bases(exprs, gen):
+    """x**n with a compound x prints as x*x*...: give x its own temporary, so it is evaluated once."""
+    new, cache = [], {}
+
+    def rec(x):
+        if x.is_Atom:
+            return x
+        args = tuple(rec(a) for a in x.args)
+        y = x if args == x.args else x.func(*args)
+        if y.is_Pow and y.exp.is_Integer and abs(int(y.exp)) >= 2 and not y.base.is_Atom:
+            if y.base not in cache:
+                cache[y.base] = next(gen)
+                new.append((cache[y.base], y.base))
+            return sp.Pow(cache[y.base], y.exp, evaluate=False)
+        return y
+
+    return [rec(e) for e in exprs], new
+
+
+def lower(exprs, bindings=(), optimize: bool = True, sincos: bool = False) -> Lowered:
+    """The steps that compute ``bindings`` (symbol, expr) and ``exprs``.
+
+    ``optimize``: one CSE over the bindings and outputs together (bindings otherwise repeat their
+    shared subexpressions: sin(u) in five of them, the same exp() in position and partials), constants
+    folded, half powers through sqrt/rsqrt, compound power bases once, dead steps dropped, and with
+    ``sincos`` (OpenCL) sin and cos of one argument from one sincos. ``optimize=False`` is the
+    generator before this (bindings verbatim, CSE of the outputs only), kept for the benchmark's
+    before/after.
+    """
+    exprs, bindings = list(exprs), list(bindings)
+    gen = sp.numbered_symbols("t")
+    if not optimize:
+        replacements, reduced = sp.cse(exprs, symbols=gen)
+        return Lowered(bindings + list(replacements), reduced)
+    names = [s for s, _ in bindings]
+    values = [_prepare(e) for _, e in bindings] + [_prepare(sp.sympify(e)) for e in exprs]
+    replacements, reduced = sp.cse(values, symbols=gen)
+    defs = dict(replacements)
+    defs.update(zip(names, reduced[:len(names)]))
+    outputs = list(reduced[len(names):])
+    order = [s for s, _ in replacements] + names   # temporaries first: they never need a later binding
+    keys = list(defs)
+    lifted, extra = _lift_power_bases([defs[k] for k in keys] + outputs, gen)
+    defs = dict(zip(keys, lifted[:len(keys)]))
+    outputs = lifted[len(keys):]
+    for k, e in extra:
+        defs[k] = e
+    order = [k for k, _ in extra] + order
+    pairs = {}
+    if sincos:
+        every = [*defs.values(), *outputs]
+        sins = {a.args[0] for e in every for a in e.atoms(sp.sin)}
+        coss = {a.args[0] for e in every for a in e.atoms(sp.cos)}
+        both = sorted(sins & coss, key=sp.default_sort_key)
+        mapping = {}
+        for i, arg in enumerate(both):
+            s_, c_ = sp.Symbol(f"s{i}", real=True), sp.Symbol(f"c{i}", real=True)
+            mapping[sp.sin(arg)], mapping[sp.cos(arg)] = s_, c_
+            pairs[s_] = pairs[c_] = (s_, c_, arg)
+        if mapping:
+            defs = {k: e.xreplace(mapping) for k, e in defs.items()}
+            outputs = [e.xreplace(mapping) for e in outputs]
+            pairs = {k: (s_, c_, a.xreplace(mapping)) for k, (s_, c_, a) in pairs.items()}
+    # aliases (a temporary that is just another symbol or a number, e.g. t3 = sin(x) after sincos)
+    alias = {k: e for k, e in defs.items() if e.is_Atom}
+    while alias:
+        for k in alias:  # chains (b0 = t0, t0 = c0 after sincos) resolve to their end
+            while alias[k] in alias:
+                alias[k] = alias[alias[k]]
+        defs = {k: e.xreplace(alias) for k, e in defs.items() if k not in alias}
+        outputs = [e.xreplace(alias) for e in outputs]
+        pairs = {k: (s_, c_, a.xreplace(alias)) for k, (s_, c_, a) in pairs.items()}
+        alias = {k: e for k, e in defs.items() if e.is_Atom}
+    order = [k for k in order if k in defs]
+
+    def deps(k):
+        e = pairs[k][2] if k in pairs else defs[k]
+        return [d for d in e.free_symbols if d in defs or d in pairs]
+
+    # live steps in an order where each follows what it reads (iterative DFS: SH glyphs chain hundreds)
+    rank = {k: i for i, k in enumerate(order)}
+    for i, k in enumerate(sorted(pairs, key=str)):
+        rank.setdefault(k, len(order) + i)
+    steps, done = [], set()
+    roots = sorted({d for e in outputs for d in e.free_symbols if d in defs or d in pairs}, key=rank.get)
+    for root in roots:
+        stack = [(root, False)]
+        while stack:
+            k, expanded = stack.pop()
+            if k in done:
+                continue
+            if expanded:
+                done.add(k)
+                if k in pairs:
+                    s_, c_, arg = pairs[k]
+                    done.update((s_, c_))
+                    steps.append(SinCos(s_, c_, arg))
+                else:
+                    steps.append((k, defs[k]))
+                continue
+            stack.append((k, True))
+            stack.extend((d, False) for d in sorted(deps(k), key=rank.get, reverse=True) if d not in done)
+    return Lowered(steps, outputs)
+
+
 def function_body(fn: ParametricFunction, exprs, printer: CLPrinter = _printer,
-                  bindings=()) -> tuple[list[str], list[str]]:
-    """Lines that compute ``bindings`` (in order) and the CSE temporaries of ``exprs``, and the final
-    expressions. Backend-neutral apart from the printer: the GLSL printer reuses it with
-    ``fn.program("position")`` or ``fn.program("surface")``.
+                  bindings=(), optimize: bool = True, sincos: bool = False) -> tuple[list[str], list[str]]:
+    """Lines that compute ``bindings`` and ``exprs`` (see ``lower``), and the final expressions.
+    Backend-neutral apart from the printer and ``sincos`` (OpenCL only): the GLSL printer reuses it
+    with ``fn.program("position")`` or ``fn.program("surface")``.
     """
     def decl(e):
         return printer.bool_decl if isinstance(e, sp.logic.boolalg.Boolean) else printer.local_decl
 
-    lines = [f"    {decl(e)} {printer.doprint(sym)} = {_print_checked(printer, e, fn)};" for sym, e in bindings]
-    replacements, reduced = sp.cse(list(exprs), symbols=sp.numbered_symbols("t"))
-    lines += [f"    {decl(e)} {sym} = {_print_checked(printer, e, fn)};" for sym, e in replacements]
-    return lines, [_print_checked(printer, e, fn) for e in reduced]
+    low = lower(exprs, bindings, optimize=optimize, sincos=sincos)
+    lines = []
+    for step in low.steps:
+        if isinstance(step, SinCos):
+            lines.append(f"    float {step.c};")
+            lines.append(f"    {printer.local_decl} {step.s} = sincos({_print_checked(printer, step.arg, fn)}, &{step.c});")
+        else:
+            sym, e = step
+            lines.append(f"    {decl(e)} {printer.doprint(sym)} = {_print_checked(printer, e, fn)};")
+    return lines, [_print_checked(printer, e, fn) for e in low.outputs]
 
 
 def check_printable(fn: ParametricFunction) -> None:
@@ -216,30 +378,38 @@ def _snippet_source(fn: ParametricFunction, index: int) -> str:
     return snip + pos + surf
 
 
-# generated source per function and index: functions never change after definition, and every
-# program of a scene (LOD stage, renderers, eval) asks for the same code again
-_sources: "weakref.WeakKeyDictionary[ParametricFunction, dict[int, str]]" = weakref.WeakKeyDictionary()
+# generated source per function, index and optimize flag: functions never change after definition,
+# and every program of a scene (LOD stage, renderers, eval) asks for the same code again
+_sources: "weakref.WeakKeyDictionary[ParametricFunction, dict[tuple, str]]" = weakref.WeakKeyDictionary()
 
 
-def cl_function_source(fn: ParametricFunction, index: int) -> str:
-    """OpenCL C for one function: position-only and position-with-partials entry points."""
+def cl_function_source(fn: ParametricFunction, index: int, optimize: bool = True) -> str:
+    """OpenCL C for one function: position-only and position-with-partials entry points
+    (``optimize=False``: the unoptimised generator, for before/after measurements)."""
     per_fn = _sources.setdefault(fn, {})
-    if index not in per_fn:
-        per_fn[index] = _cl_function_source(fn, index)
-    return per_fn[index]
+    key = (index, optimize)
+    if key not in per_fn:
+        per_fn[key] = _cl_function_source(fn, index, optimize)
+    return per_fn[key]
 
 
-def _cl_function_source(fn: ParametricFunction, index: int) -> str:
+def lowered(fn: ParametricFunction, which: str, optimize: bool = True) -> Lowered:
+    """The steps of ``pl_pos_i`` (``which="position"``) or ``pl_surf_i`` ("surface") as generated."""
+    bindings, outputs = fn.program(which)
+    return lower(outputs, bindings, optimize=optimize, sincos=optimize)
+
+
+def _cl_function_source(fn: ParametricFunction, index: int, optimize: bool = True) -> str:
     head = f"// {fn.name} (from {fn.source})\n"
     if fn.is_snippet:
         return head + _snippet_source(fn, index)
     loads = param_lines(fn)
     bindings, outputs = fn.program("position")
-    lines, (x, y, z) = function_body(fn, outputs, bindings=bindings)
+    lines, (x, y, z) = function_body(fn, outputs, bindings=bindings, optimize=optimize, sincos=optimize)
     pos = (f"inline float3 pl_pos_{index}(float u, float v, __global const float* P) {{\n"
            + "\n".join(loads + lines) + f"\n    return (float3)({x}, {y}, {z});\n}}\n")
     bindings, outputs = fn.program("surface")
-    lines, r = function_body(fn, outputs, bindings=bindings)
+    lines, r = function_body(fn, outputs, bindings=bindings, optimize=optimize, sincos=optimize)
     surf = (f"inline void pl_surf_{index}(float u, float v, __global const float* P,"
             f" float3* pos, float3* du, float3* dv) {{\n" + "\n".join(loads + lines)
             + f"\n    *pos = (float3)({r[0]}, {r[1]}, {r[2]});"
@@ -248,12 +418,12 @@ def _cl_function_source(fn: ParametricFunction, index: int) -> str:
     return head + pos + surf
 
 
-def cl_dispatch_source(functions: list[ParametricFunction]) -> str:
+def cl_dispatch_source(functions: list[ParametricFunction], optimize: bool = True) -> str:
     """All functions of a scene plus the dispatchers the kernels call."""
     parts = []
     if any(f.is_snippet for f in functions):
         parts.append(kernels.source("common/dialect.cl"))
-    parts += [cl_function_source(f, i) for i, f in enumerate(functions)]
+    parts += [cl_function_source(f, i, optimize) for i, f in enumerate(functions)]
     cases_p = "".join(f"        case {i}: return pl_pos_{i}(u, v, P);\n" for i in range(len(functions)))
     cases_s = "".join(f"        case {i}: pl_surf_{i}(u, v, P, pos, du, dv); return;\n"
                       for i in range(len(functions)))
