@@ -32,7 +32,15 @@
 // (before, a patch reaching a pole was measured by its good samples alone: the points variant drew
 // the steep sheet beside the pole as stripes, the tessellated one bridged it with long triangles).
 //
-// Counters: one record of LOD_COUNTERS uints per step (LOD_CHILDREN, LOD_SPLIT, ...); record 0
+// Back faces: for an instance flagged one-sided (INST_U flags bit 0, paramlod/lod/uploads.py) the
+// step also evaluates pl_surface at a 5x5 grid over the patch widened as the point renderer
+// samples it, bounds its normals by a cone and its points by a sphere (normal_cone: the bound and
+// its one assumption are in docs/lod.md "Back-face culling") and culls the patch when every view
+// that sees it sees only its back (cone_back); twin: reference.normal_cones, cone_back. With the
+// flag clear, or backface = 0, nothing of this runs and the step is the step without it.
+//
+// Counters: one record of LOD_COUNTERS uints per step (LOD_CHILDREN, LOD_SPLIT, ..., LOD_BACKFACE: the back-facing
+// culls); record 0
 // holds the initial patch count and, at LOD_RENDER_TOTAL, the render list's length. These, the
 // patch structs and LOD_LOCAL come from the prelude (paramlod.core.layouts); LOD_GROUP, LOD_SLOTS
 // (the work-group's layout, lod_step) and LOD_MAX_VIEWS from the host (paramlod/lod/stage.py).
@@ -126,6 +134,86 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
     }
 }
 
+// --- Back-face culling (docs/lod.md "Back-face culling"; twin: reference.normal_cones, cone_back) ---
+// INST_ONE_SIDED (the prelude; set by paramlod/lod/uploads.py): back faces of this instance may be
+// culled (a one-sided material, or a closed surface whose df/du x df/dv points outwards).
+// The partials are assumed to vary over the patch no faster than CONE_LIPSCHITZ x the largest
+// difference between neighbouring nodes of the 5x5 grid shows (the one assumption of the bound).
+#define CONE_LIPSCHITZ 2.0f
+// Float32 rounding of the partials, the cross products and the trigonometry (not proven: a
+// generous allowance, far above what float32 loses on a regular patch).
+#define CONE_EPS 1e-3f
+#define CONE_NODES 25
+
+// Node k of the 5x5 grid over the patch widened by `widen` of its size per side and clamped to
+// the domain, as the point renderer's sampling range (kernels/points/points.cl point_grid).
+inline float2 cone_uv(uint k, float4 range, __global const float* I, float widen) {
+    float wu = (range.y - range.x) * widen, wv = (range.w - range.z) * widen;
+    float u0 = fmax(range.x - wu, I[INST_DOMAIN + 0]), u1 = fmin(range.y + wu, I[INST_DOMAIN + 1]);
+    float v0 = fmax(range.z - wv, I[INST_DOMAIN + 2]), v1 = fmin(range.w + wv, I[INST_DOMAIN + 3]);
+    return (float2)(u0 + (u1 - u0) * ((float)(k % 5u) * 0.25f), v0 + (v1 - v0) * ((float)(k / 5u) * 0.25f));
+}
+
+// The normal cone and bounding sphere of one patch from its 25 nodes (world positions; world
+// partials A df/du, A df/dv with A the instance's linear part; sgn: the sign of det A, so that
+// sgn (A fu x A fv) points as the renderer's normal A^-T (fu x fv)). hu, hv: the node spacing in
+// u and v. Writes cone = (axis, half-angle) and sphere = (centre, radius); a half-angle of 4
+// (> pi/2) means no cone (a bad node, a degenerate normal, or a bound wider than the normal).
+inline void normal_cone(__local const float4* np, __local const float4* pu, __local const float4* pv,
+                        float sgn, float hu, float hv, __local float4* cone, __local float4* sphere) {
+    float dup = 0.0f, dvp = 0.0f, duq = 0.0f, dvq = 0.0f, mp = 0.0f, mq = 0.0f;
+    bool ok = true;
+    for (uint k = 0; k < CONE_NODES; ++k) {
+        float3 p = pu[k].xyz, q = pv[k].xyz;
+        ok = ok && np[k].w == 0.0f && !is_bad3(p) && !is_bad3(q);
+        mp = fmax(mp, length(p)); mq = fmax(mq, length(q));
+        if (k % 5u < 4u) { dup = fmax(dup, length(pu[k + 1u].xyz - p)); duq = fmax(duq, length(pv[k + 1u].xyz - q)); }
+        if (k < 20u) { dvp = fmax(dvp, length(pu[k + 5u].xyz - p)); dvq = fmax(dvq, length(pv[k + 5u].xyz - q)); }
+    }
+    // how far either partial can be from its value at the nearest node (at most half a spacing
+    // away in u and in v)
+    float ep = 0.5f * CONE_LIPSCHITZ * (dup + dvp), eq = 0.5f * CONE_LIPSCHITZ * (duq + dvq);
+    float3 a = sgn * cross(pu[12].xyz, pv[12].xyz);
+    float ha = 0.0f, r = 0.0f;
+    float3 c = np[12].xyz;
+    for (uint k = 0; k < CONE_NODES && ok; ++k) {
+        float3 p = pu[k].xyz, q = pv[k].xyz;
+        float3 n = sgn * cross(p, q);
+        float ln = length(n);
+        // |n(x) - n_k| <= ep |q| + |p| eq + ep eq for every x the node is nearest to
+        float e = ep * length(q) + length(p) * eq + ep * eq;
+        ok = e < ln;
+        ha = fmax(ha, atan2(length(cross(a, n)), dot(a, n)) + asin(fmin(e / ln, 1.0f)));
+        r = fmax(r, length(np[k].xyz - c));
+    }
+    // a point is within half a spacing of a node in u and in v, and |df/du| <= mp + ep there
+    r += (mp + ep) * (0.5f * hu) + (mq + eq) * (0.5f * hv);
+    ok = ok && isfinite(ha) && isfinite(r) && isfinite(c.x) && isfinite(c.y) && isfinite(c.z);
+    *cone = (float4)(a, ok ? ha + CONE_EPS : 4.0f);
+    *sphere = (float4)(c, r * (1.0f + CONE_EPS));
+}
+
+// Whether every normal of the cone faces away from the camera at every point of the sphere
+// (the view matrix a rotation and translation, as the renderers assume when they turn normals with it).
+// Perspective: the angle between a normal and the eye-to-point direction is at most the axis'
+// angle to the centre + the half-angle + the sphere's angular radius; back-facing when < pi/2.
+// Orthographic: every point is seen along -z.
+inline bool cone_back(__global const float* cam, float4 cone, float4 sphere) {
+    if (!(cone.w < M_PI_2_F)) return false;
+    __global const float* V = cam + CAM_VIEW;
+    float3 a = xform_dir(V, cone.xyz);
+    float ang;
+    if (cam[CAM_PROJ + 15] != 0.0f) {
+        ang = atan2(length(a.xy), -a.z);
+    } else {
+        float3 c = xform_point(V, sphere.xyz);
+        float d = length(c);
+        if (!(d > sphere.w)) return false;
+        ang = atan2(length(cross(a, c)), dot(a, c)) + asin(sphere.w / d);
+    }
+    return ang + cone.w < M_PI_2_F;
+}
+
 // The decision for one measured patch: cull, render (or force out on the last step), or split
 // into 2, 3 or 4 children by the 7 patterns. seen: the views that see the patch (bit v: view v;
 // none: culled), written beside the render patch (render_views) so that the renderers skip the
@@ -135,7 +223,8 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
 // mu_seg, mv_seg: their longest segments; w_u, w_v: 7 x those raised to the boundary lines' need;
 // box: the union of those views' screen bounding boxes.
 inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const bool* mixed,
-                       float mu_seg, float mv_seg, float w_u, float w_v, float4 box, ulong seen, __global EvalPatch* out, uint out_cap,
+                       float mu_seg, float mv_seg, float w_u, float w_v, float4 box, ulong seen, bool back,
+                       __global EvalPatch* out, uint out_cap,
                        __global RenderPatch* render, __global ulong* render_views, uint render_cap,
                        __global uint* counters, __global uint* render_count,
                        float t_u, float t_v, uint step, uint force)
@@ -143,6 +232,8 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
     uint inst = patch.inst;
     float u0 = patch.range.x, u1 = patch.range.y, v0 = patch.range.z, v1 = patch.range.w;
     if (seen == 0ul) { atomic_inc(&counters[LOD_CULLED]); return; }  // in every view all samples outside one clip plane
+    // back-facing in every view that sees it (one-sided instances only): culled, counted as such too
+    if (back) { atomic_inc(&counters[LOD_CULLED]); atomic_inc(&counters[LOD_BACKFACE]); return; }
 
     bool a = eu[0] > t_u || eu[1] > t_u || mixed[0] || mixed[1];   // u-lines in the lower v half
     bool b = eu[2] > t_u || eu[3] > t_u || mixed[2] || mixed[3];   // u-lines in the upper v half
@@ -245,8 +336,8 @@ inline float box_float(int k) {
 // length, 8, 9 the longest u- and v-segment, 10, 11 w_u, w_v (float bits: maxima of floats >= 0 are
 // maxima of their bits, and one view's own value), 12 the mixed lines (bit k: line k), 13..16 the
 // screen box (box_key: min x, min y, max x, max y), 17, 18 the views that see the patch (bit v of
-// their 64: view v).
-#define COMB 19
+// their 64: view v), 19 set when some view that sees the patch may see its front (back-face test).
+#define COMB 20
 
 // One LOD step: a work-group of LOD_GROUP work-items measures one patch at a time (a patch's
 // samples are the expensive part, and a step with a few hundred patches would leave most of a GPU
@@ -274,7 +365,8 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
               __global uint* counters,   // per step: LOD_COUNTERS uints; see paramlod/lod/stage.py
               __global const float* inst_f, __global const uint* inst_u,
               __global const float* params, __global const float* cam, uint n_views,
-              float t_u, float t_v, uint step, uint force)
+              float t_u, float t_v, uint step, uint force,
+              uint backface, float widen)   // back-face culling on; the sampling range's widening
 {
     __local float4 wpos[LOD_SAMPLES];                      // world position; w: 1 for a bad sample
     __local float2 pos[LOD_SLOTS * LOD_SAMPLES];           // screen positions of a chunk's views
@@ -288,6 +380,9 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
     __local uint vseen[LOD_MAX_VIEWS];
     // two sets, one per patch parity: work-item 0 still reads one when the others clear the next
     __local uint comb_sets[2 * COMB];
+    // back-face culling: the 25 nodes' world positions and partials, the cone and sphere
+    __local float4 cnode[3 * CONE_NODES];
+    __local float4 cone[2];
     uint n_in = min(counters[(step - 1) * LOD_COUNTERS + LOD_CHILDREN], cap);
     __global uint* c = counters + step * LOD_COUNTERS;
     __global uint* render_count = counters + LOD_RENDER_TOTAL;
@@ -307,10 +402,30 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
             float2 uv = lod_uv(s, u0, v0, du, dv);
             wpos[s] = lod_world(func, P, I, uv.x, uv.y);
         }
+        // the same for every work-item of the group (one patch), so barriers stay uniform
+        bool one_sided = backface != 0u && (inst_u[inst * INST_U + INST_FLAGS] & INST_ONE_SIDED) != 0u;
+        if (one_sided) {
+            for (uint k = l; k < CONE_NODES; k += LOD_GROUP) {
+                float2 uv = cone_uv(k, patch.range, I, widen);
+                float3 p, fu, fv;
+                pl_surface(func, uv.x, uv.y, P, &p, &fu, &fv);
+                cnode[k] = is_bad3(p) ? (float4)(0.0f, 0.0f, 0.0f, 1.0f) : (float4)(xform_point(I + INST_MODEL, p), 0.0f);
+                cnode[CONE_NODES + k] = (float4)(xform_dir(I + INST_MODEL, fu), 0.0f);
+                cnode[2 * CONE_NODES + k] = (float4)(xform_dir(I + INST_MODEL, fv), 0.0f);
+            }
+        }
         if (l < COMB) comb[l] = l == 13u || l == 14u ? (uint)box_key(INFINITY)
                               : l == 15u || l == 16u ? (uint)box_key(-INFINITY) : 0u;
         for (uint v = l; v < n_views; v += LOD_GROUP) vseg[2u * v] = vseg[2u * v + 1u] = vneed[2u * v] = vneed[2u * v + 1u] = 0u;
         barrier(CLK_LOCAL_MEM_FENCE);
+        if (one_sided && l == 0u) {   // read after the chunks' barriers
+            __global const float* M = I + INST_MODEL;
+            float det = M[0] * (M[5] * M[10] - M[6] * M[9]) - M[1] * (M[4] * M[10] - M[6] * M[8])
+                      + M[2] * (M[4] * M[9] - M[5] * M[8]);
+            float2 uv0 = cone_uv(0u, patch.range, I, widen), uv1 = cone_uv(24u, patch.range, I, widen);
+            normal_cone(cnode, cnode + CONE_NODES, cnode + 2 * CONE_NODES, det < 0.0f ? -1.0f : 1.0f,
+                        0.25f * (uv1.x - uv0.x), 0.25f * (uv1.y - uv0.y), &cone[0], &cone[1]);
+        }
         for (uint c0 = 0; c0 < n_views; c0 += LOD_SLOTS) {
             uint nc = min((uint)LOD_SLOTS, n_views - c0);
             float4 box = (float4)(INFINITY, INFINITY, -INFINITY, -INFINITY);
@@ -394,6 +509,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                 atomic_max(&comb[8u + d], as_uint(longest));
                 atomic_max(&comb[10u + d], as_uint(raise_measure(7.0f * longest, as_float(vneed[2u * v + d]))));
             }
+            if (one_sided && !cone_back(cam + v * CAM_FLOATS, cone[0], cone[1])) atomic_or(&comb[19], 1u);
         }
         barrier(CLK_LOCAL_MEM_FENCE);
         if (l == 0u) {
@@ -405,7 +521,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                                   box_float((int)comb[15]), box_float((int)comb[16]));
             lod_decide(patch, eu, ev, mixed, as_float(comb[8]), as_float(comb[9]),
                        as_float(comb[10]), as_float(comb[11]), box, (ulong)comb[17] | ((ulong)comb[18] << 32),
-                       out, cap, render, render_views, render_cap, c, render_count, t_u, t_v, step, force);
+                       one_sided && comb[19] == 0u, out, cap, render, render_views, render_cap, c, render_count, t_u, t_v, step, force);
         }
         // no barrier here: the next patch clears the other set of comb
     }

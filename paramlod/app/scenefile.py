@@ -35,7 +35,7 @@ TOP_KEYS = {"camera", "render", "objects", "meta", "animation", "camera_path"}  
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches", "patch_budget",
                "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "mesh_threshold", "mesh_color_by"}
-OBJECT_KEYS = {"function", "params", "color", "specular", "translate", "rotate", "scale", "matrix", "variant",
+OBJECT_KEYS = {"function", "params", "color", "specular", "two_sided", "translate", "rotate", "scale", "matrix", "variant",
                "instances", "sh_field", "surfels", "mesh", "lod", "skinned", "animation", "time"}
 SOURCE_KEYS = ("function", "mesh", "surfels", "sh_field")   # what an object is made of: one of them (or skinned)
 SKINNED_KEYS = ("animation", "time")   # only with skinned = "x.glb"
@@ -109,6 +109,12 @@ class _Checker:
         if not ok or not np.all(np.isfinite(v)):
             self.fail(f"{where}.{key}", f"must be a list of {n} numbers, got {v!r}", table, index, key)
         return [float(x) for x in v]
+
+    def flag(self, d, key, where, table, index=None, default=None):
+        v = d.get(key, default)
+        if not isinstance(v, bool):
+            self.fail(f"{where}.{key}", f"must be true or false, got {v!r}", table, index, key)
+        return v
 
     def num(self, d, key, where, table, index=None, default=None, lo=None, hi=None, integer=False):
         if key not in d:
@@ -232,7 +238,8 @@ def load_scene(path, size=None) -> SceneFile:
         try:
             m = _transform(o, ck, where, i)
             mat = Material(color=tuple(ck.vec(o, "color", 3, where, "objects", i, default=[0.8, 0.8, 0.8])),
-                           specular=ck.num(o, "specular", where, "objects", i, default=0.25, lo=0, hi=1))
+                           specular=ck.num(o, "specular", where, "objects", i, default=0.25, lo=0, hi=1),
+                           two_sided=ck.flag(o, "two_sided", where, "objects", i, default=True))
             if "mesh" in o:
                 _add_mesh(scene, o, path, m, mat, ck, where, i)
             elif "skinned" in o:

@@ -171,8 +171,9 @@ INSTANCE_U = Record(
         Field("func", UINT, 1, "index of the function in the scene's function list"),
         Field("params", UINT, 1, "offset of its parameter block in the params buffer"),
         Field("object", UINT, 1, "object id (1-based)"),
-        Field("flags", UINT, 1, "unused, 0"),
-    ], prefix="INST", size="INST_U")
+        Field("flags", UINT, 1, "bit 0 (INST_ONE_SIDED): one-sided, its back faces may be culled"),
+    ], prefix="INST", size="INST_U",
+    constants=[Constant("INST_ONE_SIDED", 1, True, "InstanceU.flags: a one-sided material on a smooth function")])
 
 MATERIAL = Record(
     "material", "per instance, Scene.materials() (float4 / vec4 per instance)", [
@@ -192,7 +193,8 @@ LOD_COUNTER = Record(
         Field("children", UINT, 1, "patches the step emitted (the next step's input)"),
         Field("split", UINT), Field("culled", UINT), Field("rendered", UINT),
         Field("forced", UINT, 1, "rendered although they would split (last step)"),
-        Field("spare", UINT, 3),
+        Field("backface", UINT, 1, "culled as back-facing (also counted in culled)"),
+        Field("spare", UINT, 2),
     ], prefix="LOD", size="LOD_COUNTERS",
     constants=[Constant("LOD_RENDER_TOTAL", 1, False, "counters[LOD_RENDER_TOTAL]: the render list's length")])
 

@@ -18,6 +18,7 @@ import numpy as np
 from paramlod.core.layouts import CAMERA
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, FLAG_FORCED, initial_patches
 from paramlod.lod.stage import check_budget
+from paramlod.lod.uploads import ONE_SIDED, instance_flags
 
 F = np.float32
 
@@ -189,16 +190,31 @@ def view_masks(patches, scene_inst, functions, cam) -> np.ndarray:
     return (seen.astype(np.uint64) * bits[:, None]).sum(axis=0, dtype=np.uint64)
 
 
-def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
-    """One PATCH SUBDIVISION step; ``cam``: one or more camera records (``camera_rows``).
-    Returns (children, render patches, stats)."""
+def backfacing(patches, scene_inst, functions, cams, seen, widen) -> np.ndarray:
+    """Per patch: one-sided (INST_U flags bit 0), seen by some view, and back-facing in every view
+    that sees it (``seen``: (views, n)), as lod.cl decides it."""
+    one_sided = (scene_inst[1][patches["inst"], 3] & ONE_SIDED) != 0
+    back = one_sided & seen.any(axis=0)
+    if back.any():
+        idx = np.flatnonzero(back)
+        cone, sphere = normal_cones(patches[idx], scene_inst, functions, widen)
+        for view, cam in enumerate(cams):
+            back[idx] &= ~seen[view, idx] | cone_back(cam, cone, sphere)
+    return back
+
+
+def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force, backface=True, widen=0.25):
+    """One PATCH SUBDIVISION step; ``cam``: one or more camera records (``camera_rows``);
+    ``backface``: cull the back-facing patches of one-sided instances, whose cones hold over the
+    patch widened by ``widen`` per side. Returns (children, render patches, stats)."""
     n = len(patches)
     r = patches["range"].astype(np.float32)
     inst = patches["inst"]
     m = _measure(patches, scene_inst, functions, cam)
 
     seen = m["code"] == 0
-    culled = ~seen.any(axis=0)
+    back = backfacing(patches, scene_inst, functions, camera_rows(cam), seen, widen) if backface else np.zeros(n, bool)
+    culled = ~seen.any(axis=0) | back
     eu, ev = _most(m["eu"], seen), _most(m["ev"], seen)
     msu, msv = _most(m["msu"], seen), _most(m["msv"], seen)
     w_u, w_v = _most(m["w_u"], seen), _most(m["w_v"], seen)
@@ -246,7 +262,7 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force):
             children.append(ch)
     children = np.concatenate(children) if children else np.zeros(0, EVAL_DTYPE)
     stats = {"step": step, "in": n, "split": int(sp.sum()), "culled": int(culled.sum()),
-             "out": int(to_render.sum()), "forced": int((to_render & split).sum())}
+             "out": int(to_render.sum()), "forced": int((to_render & split).sum()), "backface": int(back.sum())}
     return children, rp, stats
 
 
@@ -254,18 +270,110 @@ def run_lod(scene, camera_records, settings, functions=None):
     """The whole LOD stage in numpy for one or more views (``camera_records``: their records one
     after another, or as rows): returns (render patches, per-step stats)."""
     functions = functions or scene.functions()
-    inst = scene.instance_buffers()
+    inst_f, inst_u, params = scene.instance_buffers()
+    inst = (inst_f, instance_flags(scene, inst_u), params)   # the flags SceneBuffers sends
     patches = initial_patches(inst[0][:, 28:32], settings.initial_grid)
     out, steps, made = [], [], 0
     for step in range(1, settings.max_steps + 1):
         if len(patches) == 0:
-            steps.append({"step": step, "in": 0, "split": 0, "culled": 0, "out": 0, "forced": 0})
+            steps.append({"step": step, "in": 0, "split": 0, "culled": 0, "out": 0, "forced": 0, "backface": 0})
             continue
         patches, rp, st = lod_step(patches, inst, functions, camera_rows(camera_records),
                                    settings.threshold[0], settings.threshold[1], step,
-                                   step == settings.max_steps)
+                                   step == settings.max_steps, settings.backface_cull, settings.backface_widen)
         out.append(rp)
         steps.append(st)
         made += len(patches)
         check_budget(made, settings)   # as the device stage: splitting stops at the budget
     return (np.concatenate(out) if out else np.zeros(0, RENDER_DTYPE)), steps
+
+
+# --- back-face culling (kernels/lod/lod.cl normal_cone, cone_back; docs/lod.md) ---------------
+CONE_LIPSCHITZ = F(2.0)   # lod.cl CONE_LIPSCHITZ
+CONE_EPS = F(1e-3)        # lod.cl CONE_EPS
+HALF_PI = F(np.pi / 2)
+
+
+def cone_nodes(patches, inst_f, widen):
+    """(u, v) float32 (n, 5, 5) [j over v, i over u] of the cone's nodes: the 5x5 grid over each
+    patch widened by ``widen`` of its size per side and clamped to its instance's domain."""
+    r = patches["range"].astype(np.float32)
+    dom = inst_f[patches["inst"], 28:32]
+    w = F(widen)
+    wu, wv = (r[:, 1] - r[:, 0]) * w, (r[:, 3] - r[:, 2]) * w
+    u0, u1 = np.fmax(r[:, 0] - wu, dom[:, 0]), np.fmin(r[:, 1] + wu, dom[:, 1])
+    v0, v1 = np.fmax(r[:, 2] - wv, dom[:, 2]), np.fmin(r[:, 3] + wv, dom[:, 3])
+    g = np.arange(5, dtype=np.float32) * F(0.25)
+    u = u0[:, None, None] + (u1 - u0)[:, None, None] * g[None, None, :]
+    v = v0[:, None, None] + (v1 - v0)[:, None, None] * g[None, :, None]
+    return np.broadcast_to(u, (len(r), 5, 5)), np.broadcast_to(v, (len(r), 5, 5))
+
+
+def _norm(x):
+    return np.sqrt((x * x).sum(axis=-1, dtype=np.float32)).astype(np.float32)
+
+
+def normal_cones(patches, scene_inst, functions, widen):
+    """Twin of lod.cl normal_cone: per patch the normal cone (axis xyz, half-angle; 4 where there is
+    none) and bounding sphere (centre xyz, radius) in world space, float32 (n, 4) each, holding
+    over the patch widened by ``widen`` per side (under the bound's assumption, docs/lod.md)."""
+    inst_f, inst_u, params = scene_inst
+    n = len(patches)
+    u, v = cone_nodes(patches, inst_f, widen)
+    inst = patches["inst"]
+    pos = np.full((n, 5, 5, 3), np.nan, np.float32)
+    fu, fv = pos.copy(), pos.copy()
+    for i in np.unique(inst):
+        sel = inst == i
+        fn = functions[inst_u[i, 0]]
+        block = params[inst_u[i, 1]: inst_u[i, 1] + fn.param_count]
+        p, a, b = fn.surface(u[sel].astype(np.float64), v[sel].astype(np.float64), block)
+        pos[sel], fu[sel], fv[sel] = p.astype(np.float32), a.astype(np.float32), b.astype(np.float32)
+    M = inst_f[inst, 0:16].reshape(n, 4, 4)
+    A = M[:, :3, :3]
+    with np.errstate(all="ignore"):
+        bad = ~np.all(np.isfinite(pos), axis=-1)
+        wp = (np.einsum("nij,nabj->nabi", A, pos) + M[:, None, None, :3, 3]).astype(np.float32)
+        P = np.einsum("nij,nabj->nabi", A, fu).astype(np.float32)
+        Q = np.einsum("nij,nabj->nabi", A, fv).astype(np.float32)
+        sgn = np.where(np.linalg.det(A.astype(np.float64)) < 0, F(-1), F(1)).astype(np.float32)
+        ok = ~bad.any(axis=(1, 2)) & np.all(np.isfinite(P), axis=(1, 2, 3)) & np.all(np.isfinite(Q), axis=(1, 2, 3))
+        mp, mq = _norm(P).max(axis=(1, 2)), _norm(Q).max(axis=(1, 2))
+        dup, duq = _norm(P[:, :, 1:] - P[:, :, :-1]).max(axis=(1, 2)), _norm(Q[:, :, 1:] - Q[:, :, :-1]).max(axis=(1, 2))
+        dvp, dvq = _norm(P[:, 1:] - P[:, :-1]).max(axis=(1, 2)), _norm(Q[:, 1:] - Q[:, :-1]).max(axis=(1, 2))
+        ep = F(0.5) * CONE_LIPSCHITZ * (dup + dvp)
+        eq = F(0.5) * CONE_LIPSCHITZ * (duq + dvq)
+        nrm = sgn[:, None, None, None] * np.cross(P, Q).astype(np.float32)
+        ln = _norm(nrm)
+        a = nrm[:, 2, 2]
+        # |n(x) - n_k| <= e for every x node k is nearest to (docs/lod.md), so n(x) != 0 when e < |n_k|
+        e = ep[:, None, None] * _norm(Q) + _norm(P) * eq[:, None, None] + (ep * eq)[:, None, None]
+        ok &= np.all(e < ln, axis=(1, 2))
+        ang = np.arctan2(_norm(np.cross(a[:, None, None], nrm)), (a[:, None, None] * nrm).sum(-1, dtype=np.float32))
+        ha = (ang + np.arcsin(np.fmin(e / ln, F(1)))).astype(np.float32).max(axis=(1, 2))
+        c = wp[:, 2, 2]
+        r = _norm(wp - c[:, None, None]).max(axis=(1, 2))
+        hu = F(0.25) * (u[:, 0, 4] - u[:, 0, 0])
+        hv = F(0.25) * (v[:, 4, 0] - v[:, 0, 0])
+        r = (r + (mp + ep) * (F(0.5) * hu) + (mq + eq) * (F(0.5) * hv)).astype(np.float32)
+        ok &= np.isfinite(ha) & np.isfinite(r) & np.all(np.isfinite(c), axis=1)
+    cone = np.concatenate([a, np.where(ok, ha + CONE_EPS, F(4))[:, None]], axis=1).astype(np.float32)
+    sphere = np.concatenate([c, (r * (F(1) + CONE_EPS))[:, None]], axis=1).astype(np.float32)
+    return cone, sphere
+
+
+def cone_back(cam, cone, sphere) -> np.ndarray:
+    """Twin of lod.cl cone_back for one camera record: per patch, whether every normal of its cone
+    faces away from the camera at every point of its sphere."""
+    V = np.asarray(cam, np.float32)[0:16].reshape(4, 4)
+    with np.errstate(all="ignore"):
+        a = (cone[:, :3] @ V[:3, :3].T).astype(np.float32)
+        if cam[31] != 0:   # orthographic (CAM_PROJ + 15)
+            ang = np.arctan2(_norm(a[:, :2]), -a[:, 2])
+            ok = np.ones(len(cone), bool)
+        else:
+            c = (sphere[:, :3] @ V[:3, :3].T + V[:3, 3]).astype(np.float32)
+            d = _norm(c)
+            ok = d > sphere[:, 3]
+            ang = np.arctan2(_norm(np.cross(a, c)), (a * c).sum(-1, dtype=np.float32)) + np.arcsin(sphere[:, 3] / d)
+        return ok & (cone[:, 3] < HALF_PI) & ((ang + cone[:, 3]).astype(np.float32) < HALF_PI)

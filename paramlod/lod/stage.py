@@ -33,6 +33,12 @@ class LodSettings:
     # patches made by splitting in one frame, all steps together (a 1080p frame of a detailed
     # scene makes thousands; a view where everything splits makes millions)
     patch_budget: int = 1 << 21
+    # cull patches that are back-facing in every view that sees them, for instances flagged
+    # one-sided (SceneBuffers: a material with two_sided False); docs/lod.md "Back-face culling"
+    backface_cull: bool = True
+    # the widest sampling range a renderer draws of a patch, per side as a share of its size (the
+    # cone and sphere hold over it): 0.25 covers every PointSettings.widen and TessSettings.overlap
+    backface_widen: float = 0.25
 
     def validate(self):
         tu, tv = self.threshold
@@ -43,6 +49,10 @@ class LodSettings:
         gu, gv = self.initial_grid
         if not (1 <= gu <= 64 and 1 <= gv <= 64):
             raise SceneError(f"lod initial_grid must be in 1..64 per axis, got {self.initial_grid}")
+        if not isinstance(self.backface_cull, (bool, np.bool_)):
+            raise SceneError(f"lod backface_cull must be true or false, got {self.backface_cull!r}")
+        if not (isinstance(self.backface_widen, (int, float, np.floating)) and 0 <= self.backface_widen <= 1):
+            raise SceneError(f"lod backface_widen must be a share of a patch in [0, 1], got {self.backface_widen!r}")
         for name in ("max_patches", "patch_budget"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 1 << 31:
@@ -69,8 +79,8 @@ class _Buffer:
 
 # the per-step counter record (paramlod.core.layouts.LOD_COUNTER; LOD_* in the kernels' prelude)
 LOD_COUNTERS = LOD_COUNTER.length
-C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED = (
-    LOD_COUNTER.offset(f) for f in ("children", "split", "culled", "rendered", "forced"))
+C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED, C_BACKFACE = (
+    LOD_COUNTER.offset(f) for f in ("children", "split", "culled", "rendered", "forced", "backface"))
 LOD_RENDER_TOTAL = LOD_COUNTER.constant("LOD_RENDER_TOTAL")   # counters[0, 1]: the render list's length
 LOD_LOCAL = constant("LOD_LOCAL")   # work-items measuring one patch together (kernels/lod/lod.cl)
 # views one work-group projects at once (local memory: 89 x 9 bytes a view)
@@ -178,7 +188,8 @@ class LodStage:
         steps_n = self._steps_n = max_steps if depth is None else min(max_steps, depth + 1)
         cap = min(b.capacity for b in self.bufs)
         # the buffers themselves, not their ids: held here, they cannot be freed and their ids reused
-        bound = (*inst, cam_buf, int(n_views), float(tu), float(tv), max_steps, cap,
+        backface, widen = np.uint32(bool(settings.backface_cull)), np.float32(settings.backface_widen)
+        bound = (*inst, cam_buf, int(n_views), float(tu), float(tv), max_steps, cap, int(backface), float(widen),
                  *(b.buf for b in (self.init, *self.bufs, self.render, self.render_views)))
         layout, kernels = self._kernels(n_views)
         if bound != self._bound.get(layout):
@@ -187,7 +198,7 @@ class LodStage:
                 k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf, self.render_views.buf,
                            np.uint32(self.render.capacity), self.counters, *inst, cam_buf,
                            np.uint32(n_views), tu, tv,
-                           np.uint32(step), np.uint32(step == max_steps))
+                           np.uint32(step), np.uint32(step == max_steps), backface, widen)
             self._bound[layout] = bound
         if self._start_n != n_init:
             start = np.zeros((16, LOD_COUNTERS), np.uint32)
@@ -251,7 +262,7 @@ class LodStage:
         for step in range(1, self._max_steps + 1):   # steps not enqueued had no input: zeros
             c = counts[step]
             steps.append({"step": step, "in": n_in, "split": int(c[C_SPLIT]), "culled": int(c[C_CULLED]),
-                          "out": int(c[C_RENDERED]), "forced": int(c[C_FORCED])})
+                          "out": int(c[C_RENDERED]), "forced": int(c[C_FORCED]), "backface": int(c[C_BACKFACE])})
             n_in = int(c[C_CHILDREN])
         return int(counts[0, LOD_RENDER_TOTAL]), steps
 

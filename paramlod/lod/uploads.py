@@ -1,14 +1,57 @@
 """Device copies of a scene's parametric instance buffers and of each frame's camera records:
 what the LOD stage and the parametric renderers read (per scene; re-sent only when the scene or
 its time changed). A multi-view frame (a ``paramlod.core.views.Views``) sends one camera record
-per view, one after another."""
+per view, one after another.
+
+The instance uints sent carry the LOD stage's per-instance flags (INST_U ``flags``): bit 0
+(``ONE_SIDED``) lets the stage cull the instance's back-facing patches (kernels/lod/lod.cl). It is
+set for the instances of objects whose material says ``two_sided = False``, when their function
+is smooth (``smooth_function``: the normal cone's bound assumes partials that do not jump);
+materials are two-sided by default, so by default nothing is ever culled as back-facing."""
 from __future__ import annotations
 
+import numpy as np
 import pyopencl as cl
+import sympy as sp
 import pyopencl.array as cla
 
+from paramlod.core.layouts import INSTANCE_U
 from paramlod.core.views import as_views
 from paramlod.device.context import cl_device
+
+ONE_SIDED = np.uint32(INSTANCE_U.constant("INST_ONE_SIDED"))   # kernels/lod/lod.cl
+
+
+# operations whose result or partials jump or kink: no Lipschitz bound of the partials can be read
+# from samples across them (palm_trunk's sawtooth rings, the hearts' abs)
+_NOT_SMOOTH = (sp.Piecewise, sp.Abs, sp.floor, sp.ceiling, sp.frac, sp.Min, sp.Max, sp.sign,
+               sp.Heaviside, sp.Mod)
+
+
+def smooth_function(fn) -> bool:
+    """Whether the LOD stage may bound ``fn``'s normals from samples (docs/lod.md, "Back-face
+    culling"): a sympy-defined function without operations that jump or kink (a snippet's body
+    cannot be inspected: not smooth)."""
+    if fn.exprs is None:
+        return False
+    for e in (*fn.exprs, *(b for _, b in fn.bindings)):
+        if e.has(*_NOT_SMOOTH):
+            return False
+    return True
+
+
+def instance_flags(scene, inst_u) -> np.ndarray:
+    """``inst_u`` (uint32 [n, INST_U]) with the LOD stage's flags set (a copy): ONE_SIDED for the
+    instances (parts included) of objects whose material has ``two_sided`` False, where the
+    instance's function is smooth."""
+    one_sided = [o.object_id for o in scene.objects if not o.material.two_sided]
+    out = np.array(inst_u, np.uint32, copy=True)
+    if one_sided and len(out):
+        smooth = np.array([smooth_function(f) for f in scene.functions()], bool)
+        sel = np.isin(out[:, INSTANCE_U.offset("object")], np.asarray(one_sided, np.uint32))
+        sel &= smooth[out[:, INSTANCE_U.offset("func")]]
+        out[sel, INSTANCE_U.offset("flags")] |= ONE_SIDED
+    return out
 
 
 class SceneBuffers:
@@ -24,6 +67,7 @@ class SceneBuffers:
         key = (scene._version, scene.time)
         if key != self._key:
             inst_f, inst_u, params = scene.instance_buffers()
+            inst_u = instance_flags(scene, inst_u)
             self._dev = {
                 "inst": tuple(cla.to_device(q, a).data for a in (inst_f, inst_u, params)),
                 "materials": cla.to_device(q, scene.materials()).data,

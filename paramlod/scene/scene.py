@@ -46,8 +46,13 @@ _versions = itertools.count(1)
 class Material:
     color: tuple[float, float, float] = (0.8, 0.8, 0.8)  # linear RGB
     specular: float = 0.25
+    # False: only the side df/du x df/dv points to is seen (a closed surface's outside, or a
+    # one-sided sheet), so the LOD stage may cull back-facing patches (docs/lod.md)
+    two_sided: bool = True
 
     def __post_init__(self):
+        if not isinstance(self.two_sided, (bool, np.bool_)):
+            raise SceneError(f"material two_sided must be true or false, got {self.two_sided!r}")
         c = np.asarray(self.color, dtype=np.float64)
         if c.shape != (3,) or not np.all((c >= 0) & (c <= 1)):
             raise SceneError(f"material color must be three numbers in [0, 1], got {self.color!r}")
