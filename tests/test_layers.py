@@ -39,7 +39,8 @@ ALLOWED = {
     # plugins see the public API only (and each other)
     "functions": {"public", "dsl", "errors", "functions", "dmri.sh"},
 }
-KIT = {"registry", "targets", "gl_targets", "aa", "shading", "sampling"}   # what a renderer may import from renderers/
+# what a renderer may import from renderers/ (occlusion: the depth-pyramid culling any key-buffer renderer can use)
+KIT = {"registry", "targets", "gl_targets", "aa", "shading", "sampling", "occlusion"}
 
 
 def modules() -> dict[str, Path]:

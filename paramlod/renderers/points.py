@@ -11,6 +11,7 @@ import pyopencl as cl
 from paramlod.device.context import cl_device
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
 from paramlod.lod.uploads import SceneBuffers
+from paramlod.renderers.occlusion import OcclusionCuller
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
@@ -21,16 +22,25 @@ LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
 
 
+class _Launch:
+    """The schedule and sample kernels of one list drawn in a frame, with the arguments bound."""
+
+    def __init__(self, program):
+        self.schedule = cl.Kernel(program, "points_schedule")
+        self.kernel = cl.Kernel(program, "points_direct")
+        self.bound = None
+
+
 class DirectPointRenderer:
     def __init__(self, functions, record: bool = False):
         defines = {"PL_RECORD": 1} if record else {}
         if cl_device().is_gpu:   # sum the counters per work-group (see the end of points_direct)
             defines["PL_GROUP_COUNTERS"] = 1
-        prog = build(["common/keys.cl", "points/points.cl"], functions, defines)
-        # own kernel objects: arguments are set only when they change (see enqueue)
-        self.schedule = cl.Kernel(prog, "points_schedule")
-        self.kernel = cl.Kernel(prog, "points_direct")
-        self._bound = None
+        # occlusion.cl shares the program: the function code is compiled once
+        self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions, defines)
+        # own kernel objects per list drawn in a frame (all patches, or the two occlusion phases):
+        # arguments are set only when they change (see enqueue)
+        self._launches = [_Launch(self.program) for _ in range(2)]
         self.record = record
         dev = cl_device()
         # COUNTERS, then the schedule's counter (kernels/points.cl, SCHED_AT)
@@ -43,9 +53,12 @@ class DirectPointRenderer:
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
-                light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None):
+                light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None,
+                phase: int = 0):
         """Enqueue the render of the ``count_buf[count_at]`` (read on the device, at most
         ``capacity``) patches of ``patches_buf`` without waiting; ``counts()`` reads the counters.
+        ``phase`` 1: a second list of the same frame (occlusion culling's phase 2), whose counts
+        and device time add to the first's.
         ``n_views``: camera records in ``cam_buf``, each sample is written into layer v of
         ``keys`` for every view v that sees its patch (``view_masks``: a uint64 per patch, bit v
         for view v, as LodStage.render_views; needed with several views) and whose frustum holds
@@ -62,7 +75,10 @@ class DirectPointRenderer:
         if capacity > self.order_capacity:
             self._order = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8 * capacity)
             self.order_capacity = capacity
-        cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
+        if phase == 0:
+            cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
+        else:   # only the schedule's counter
+            cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * len(COUNTERS), 8)
         sampling = (settings.factor(), settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), self._order,
                 *inst, materials_buf, cam_buf, np.uint32(n_views), view_masks, light_buf, *sampling, np.float32(settings.widen),
@@ -70,14 +86,16 @@ class DirectPointRenderer:
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time
-        if args != self._bound:
-            self.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), *sampling,
-                                   np.uint32(settings.max_side), self._order, self.counters)
-            self.kernel.set_args(*args)
-            self._bound = args
+        k = self._launches[phase]
+        if args != k.bound:
+            k.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), *sampling,
+                                np.uint32(settings.max_side), self._order, self.counters)
+            k.kernel.set_args(*args)
+            k.bound = args
         items = min(-(-capacity // LOCAL_SIZE), self.max_groups) * LOCAL_SIZE
-        self.events = (launch(q, self.schedule, (items,), (LOCAL_SIZE,)),
-                       launch(q, self.kernel, (self.max_groups * LOCAL_SIZE,), (LOCAL_SIZE,)))
+        events = (launch(q, k.schedule, (items,), (LOCAL_SIZE,)),
+                  launch(q, k.kernel, (self.max_groups * LOCAL_SIZE,), (LOCAL_SIZE,)))
+        self.events = events if phase == 0 else (self.events[0], events[1])
 
     def device_ms(self) -> float:
         """Device time of the last render (schedule and samples; after its wait)."""
@@ -111,6 +129,9 @@ class DirectPoints:
         self.buffers = SceneBuffers(LIGHT)
         self.lod = LodStage(functions)
         self.points = DirectPointRenderer(functions, record=record)
+        # the recording test hook indexes samples by render-list place: no culling with it
+        self.occlusion = None if record else OcclusionCuller(self.points.program)
+        self.culled = False   # the last frame was drawn in two occlusion phases
         self.dev = None
 
     def prepare(self, scene, camera, settings):
@@ -119,23 +140,43 @@ class DirectPoints:
 
     def enqueue(self, target, settings):
         d = self.dev
-        self.lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"])
-        self.points.enqueue(self.lod.render.buf, self.lod.counters, LOD_RENDER_TOTAL, self.lod.render.capacity,
-                            d["inst"], d["materials"], d["cam"], d["light"], target, settings.points,
-                            n_views=d["n_views"], view_masks=self.lod.render_views.buf)
+        lod, pts = self.lod, self.points
+        lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"])
+        draw = (d["inst"], d["materials"], d["cam"], d["light"], target, settings.points)
+        self.culled = self.occlusion is not None and settings.points.occlusion and d["n_views"] == 1
+        if not self.culled:
+            pts.enqueue(lod.render.buf, lod.counters, LOD_RENDER_TOTAL, lod.render.capacity, *draw,
+                        n_views=d["n_views"], view_masks=lod.render_views.buf)
+            return
+        occ, cap = self.occlusion, lod.render.capacity
+        occ.enqueue_first(lod.render.buf, lod.counters, LOD_RENDER_TOTAL, cap, d["inst"], d["cam"],
+                          settings.points.widen, (target.width, target.height))
+        pts.enqueue(occ.early, occ.counts_buf, 0, cap, *draw)
+        occ.enqueue_second(lod.render.buf, d["cam"], target, cap)
+        pts.enqueue(occ.late, occ.counts_buf, 2, cap, *draw, phase=1)
+        occ.enqueue_keep(target)
 
     def collect(self):
         self.lod.read_counters(wait=False)
         self.points.read_counts()
+        if self.culled:
+            self.occlusion.read_counts()
 
     def grow(self, settings) -> bool:
         return self.lod.grow(settings.lod)
 
     def stats(self) -> dict:
         n, steps = self.lod.result()
-        return {"render_patches": n, "lod_steps": steps, "forced_patches": sum(s["forced"] for s in steps),
-                **self.points.counts(wait=False),
-                "ms": {"lod": self.lod.device_ms(), "render": self.points.device_ms()}}
+        out = {"render_patches": n, "lod_steps": steps, "forced_patches": sum(s["forced"] for s in steps),
+               **self.points.counts(wait=False),
+               "ms": {"lod": self.lod.device_ms(), "render": self.points.device_ms()}}
+        if self.culled:   # render: from the first bound to the last sample
+            c = self.occlusion.counts()
+            out["occlusion"] = {"drawn_first": c["early"], "deferred": c["deferred"], "drawn_second": c["late"],
+                                "occluded": c["deferred"] - c["late"]}
+            first, last = self.occlusion.events[0], self.points.events[-1]
+            out["ms"]["render"] = (last.profile.end - first.profile.start) * 1e-6
+        return out
 
 
 register_renderer(RendererSpec("points", "parametric", DirectPoints, "points", "keys", PointSettings,
