@@ -16,6 +16,7 @@ from paramlod.app.args import add_output, add_size, add_stats, parse_vec3, run_r
 from paramlod.core.camera import Camera
 from paramlod.errors import SurfelError
 from paramlod.surfels.build.sampler import sample
+from paramlod.surfels.build.schedule import auto_resolution
 from paramlod.surfels.format import SurfelSet
 from paramlod.surfels.render import FixedCount, FixedSize, default_camera, render_surfels, up_axis
 
@@ -61,7 +62,7 @@ class SampledWith:
     """check(path) for resume: a .surfels file that loads and was sampled with these settings."""
     count: int
     views: int
-    resolution: int
+    resolution: int | None   # None: auto_resolution(count)
     seed: int
 
     def __call__(self, path) -> bool:
@@ -70,7 +71,7 @@ class SampledWith:
         except SurfelError:
             return False
         return (m.get("requested"), m.get("views"), m.get("resolution"), m.get("seed")) == \
-            (self.count, self.views, self.resolution, self.seed)
+            (self.count, self.views, auto_resolution(self.count) if self.resolution is None else self.resolution, self.seed)
 
 
 def cmd_sample_job(args) -> int:
@@ -167,7 +168,8 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="output .surfels file; for several sources a pattern "
                                                          "with {stem} or {name}, e.g. out/{stem}.surfels")
     s.add_argument("--views", type=int, default=16, help="orthographic views on a Fibonacci sphere (1..32, default 16)")
-    s.add_argument("--resolution", type=int, default=512, help="G-buffer resolution per view (default 512)")
+    s.add_argument("--resolution", type=int, default=None,
+                   help="G-buffer resolution per view (default: from the count, 128 up to 10k surfels, 512 from 42k)")
     s.add_argument("--seed", type=int, default=0, help="seed of the first sample (default 0)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     dist.add_job_options(s)

@@ -8,8 +8,8 @@ import numpy as np
 from paramlod.core.color import linear_to_srgb8_f64
 from paramlod.core.hashing import dither
 from paramlod.core.layouts import CAMERA
-from paramlod.surfels.build.schedule import (ALL_ONES, HI, f32_bits, handover_r2, key_pixel, key_r2, level_strides,
-                                             remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
+from paramlod.surfels.build.schedule import (ALL_ONES, HI, compact_sort, f32_bits, handover_r2, key_pixel, key_r2,
+                                             level_strides, remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
 
 
 def dist2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -65,13 +65,6 @@ def survive(cand, thr2, conf):
     own = np.zeros(len(cand), bool)
     own[ok] = conf[key_pixel(cand[ok])] == cand[ok]
     return np.where(ok & own, cand, np.uint64(0))
-
-
-def compact_sort(out):
-    """Survivors in site order, then stably sorted by decreasing radius (the radix sort)."""
-    s = out[out != 0]
-    hi = (s >> np.uint64(32)).astype(np.uint32)
-    return s[np.argsort(~hi, kind="stable")]
 
 
 def seed_pixel(pos, seed):

@@ -12,7 +12,11 @@ stable scan and sort), so a run is deterministic for a given input, seed and dev
 Rounds with large radii run on point-subsampled G-buffers (strides 8, 4, 2, then 1: coarse to
 fine), and the disc splats skip 16x16 tiles that hold no covered pixel or lie out of reach
 (their 3D bounding box is farther than the radius). Both only save work: the numpy twin in
-reference.py runs the same schedule by brute force and matches bit for bit.
+reference.py runs the same schedule by brute force and matches bit for bit. On CPU devices step (5)
+runs on the host (numpy's stable sort: the same keys, without dozens of launches a round).
+
+The rounds fix the order; relax.py then evens out the full set on the host (sample_gbuffer's
+``relax_iterations``), moving each surfel by a fraction of the final spacing.
 """
 from __future__ import annotations
 
@@ -30,8 +34,10 @@ from paramlod.device.programs import build
 from paramlod.errors import SurfelError
 from paramlod.scene.scene import Scene
 from paramlod.surfels.build.gbuffer import GBuffer, mesh_gbuffer, scene_gbuffer
-from paramlod.surfels.build.schedule import (HI, THRESHOLD, handover_r2, key_pixel, key_r2, level_strides,
-                                             remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
+from paramlod.surfels.build.relax import ITERATIONS, relax
+from paramlod.surfels.build.schedule import (HI, THRESHOLD, auto_resolution, compact_sort, handover_r2, key_pixel,
+                                             key_r2, level_strides, remap_keys, resume_radii, splat_r2, stop_r2,
+                                             threshold_r2)
 from paramlod.surfels.build.sources import TriangleSoup, load_mesh, soup_from_trimesh
 from paramlod.surfels.format import SurfelSet
 
@@ -45,18 +51,19 @@ def tile_bounds(position: np.ndarray):
     (K, th, tw, 4) lo and hi; lo.w = 1 where the tile has a covered pixel."""
     k, h, w = position.shape[:3]
     th, tw = -(-h // TILE), -(-w // TILE)
-    p = np.full((k, th * TILE, tw * TILE, 4), np.nan, np.float32)
-    p[:, :h, :w] = np.where(position[..., 3:4] > 0, position, np.nan)
-    p = p.reshape(k, th, TILE, tw, TILE, 4).transpose(0, 1, 3, 2, 4, 5).reshape(k, th, tw, TILE * TILE, 4)
-    any_ = ~np.all(np.isnan(p[..., 0]), axis=-1)
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        lo = np.nanmin(p, axis=3)
-        hi = np.nanmax(p, axis=3)
-    lo = np.where(any_[..., None], lo, 0.0).astype(np.float32)
-    hi = np.where(any_[..., None], hi, 0.0).astype(np.float32)
-    lo[..., 3] = any_
-    return np.ascontiguousarray(lo), np.ascontiguousarray(hi)
+    valid = position[..., 3] > 0
+    lo = np.zeros((k, th, tw, 4), np.float32)
+    hi = np.zeros((k, th, tw, 4), np.float32)
+    pad = ((0, 0), (0, th * TILE - h), (0, tw * TILE - w))
+    for c in range(3):   # one channel at a time: min/max over the two tile axes, no nan handling
+        ch = np.pad(position[..., c], pad).reshape(k, th, TILE, tw, TILE)
+        v = np.pad(valid, pad).reshape(k, th, TILE, tw, TILE)
+        lo[..., c] = np.where(v, ch, np.inf).min(axis=(2, 4))
+        hi[..., c] = np.where(v, ch, -np.inf).max(axis=(2, 4))
+    any_ = np.pad(valid, pad).reshape(k, th, TILE, tw, TILE).any(axis=(2, 4))
+    lo[~any_], hi[~any_] = 0.0, 0.0
+    lo[..., 3] = hi[..., 3] = any_
+    return lo, hi
 
 
 def half_box(r2: float, scale: float) -> int:
@@ -94,7 +101,8 @@ class RoundStats:
 class Sampler:
     """Device state of one sampling run; the passes are methods so that tests can check each."""
 
-    def __init__(self, gbuf: GBuffer, target: int, seed: int = 0, threshold: float = THRESHOLD):
+    def __init__(self, gbuf: GBuffer, target: int, seed: int = 0, threshold: float = THRESHOLD,
+                 host_sort: bool | None = None):
         import pyopencl as cl
         import pyopencl.array as cla
 
@@ -114,6 +122,10 @@ class Sampler:
         self.frame = (*[np.float32(x) for x in vs.centre], np.float32(vs.scale))
         self.scale = float(np.float32(vs.scale))
         dev = cl_device()
+        # Compact and sort the survivors on the host on CPU devices: there pyopencl's scan and radix
+        # sort are dozens of launches a round (most of a round's time at small counts), while the
+        # survivor array is small. Same result either way (a stable sort of the same keys).
+        self.host_sort = (not dev.is_gpu) if host_sort is None else bool(host_sort)
         self.q = q = dev.queue
         prog = build(["surfels/surfels_sample.cl"])
         self.k = {name: cl.Kernel(prog, name) for name in
@@ -189,6 +201,11 @@ class Sampler:
         out = cla.empty(self.q, n, np.uint64)
         self.k["survive"](self.q, (_round_up(n, LOCAL),), (LOCAL,), self.cand.data, np.uint32(n), np.float32(thr2),
                           self.conf.data, out.data, self.counters.data)
+        if self.host_sort:
+            srt = compact_sort(out.get())
+            if len(srt):
+                out[:len(srt)].set(srt)
+            return out, len(srt)
         packed, count, _ = copy_if(out, "ary[i] != 0", queue=self.q)
         m = int(count.get())
         if m == 0:
@@ -300,13 +317,19 @@ def run_levels(gbuf: GBuffer, n: int, seed: int = 0, threshold: float = THRESHOL
 
 
 def sample_gbuffer(gbuf: GBuffer, n: int, seed: int = 0, progress: bool = False,
-                   threshold: float = THRESHOLD) -> SurfelSet:
+                   threshold: float = THRESHOLD, relax_iterations: int = ITERATIONS) -> SurfelSet:
     """Sample ``n`` blue surfels from G-buffers (fewer when the G-buffers hold fewer distinct
-    points: then ``meta['requested']`` keeps n and a warning says so)."""
+    points: then ``meta['requested']`` keeps n and a warning says so). The farthest-point rounds
+    give the order; ``relax_iterations`` of relax.relax then even out the full set (0: the
+    surfels stay on their pixels)."""
     n = _check_count(n)
     if not 0.0 < threshold <= 1.0:
         raise SurfelError(f"threshold must be in (0, 1], got {threshold}")
+    if isinstance(relax_iterations, bool) or not isinstance(relax_iterations, (int, np.integer)) \
+            or relax_iterations < 0:
+        raise SurfelError(f"relax_iterations must be an integer >= 0, got {relax_iterations!r}")
     covered = gbuf.check()
+    relax_iterations = int(relax_iterations)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -329,14 +352,16 @@ def sample_gbuffer(gbuf: GBuffer, n: int, seed: int = 0, progress: bool = False,
     if len(keys) < n:
         warnings.warn(f"only {len(keys)} of {n} surfels: every covered G-buffer pixel is taken "
                       "(raise the resolution for more)", stacklevel=2)
-    return surfel_set(gbuf, keys, {"seed": int(seed), "requested": n, "threshold": threshold, "rounds": len(rounds),
-                                   "levels": strides, "covered_pixels": covered})
+    meta = {"seed": int(seed), "requested": n, "threshold": threshold, "rounds": len(rounds), "levels": strides,
+            "covered_pixels": covered, "relax_iterations": relax_iterations}
+    return surfel_set(gbuf, keys, meta, relax_iterations)
 
 
-def surfel_set(gbuf: GBuffer, keys: np.ndarray, meta: dict | None = None) -> SurfelSet:
-    """The SurfelSet of full-resolution sample keys."""
-    pix = key_pixel(keys)
-    pos = gbuf.position.reshape(-1, 4)[pix, :3]
+def surfel_set(gbuf: GBuffer, keys: np.ndarray, meta: dict | None = None, relax_iterations: int = 0) -> SurfelSet:
+    """The SurfelSet of full-resolution sample keys, relaxed with ``relax_iterations`` (normal and
+    colour: those of the covered pixel nearest to the relaxed position)."""
+    p, pix = relax(gbuf, key_pixel(keys), relax_iterations)
+    pos = p.astype(np.float32)
     nrm = gbuf.normal.reshape(-1, 3)[pix]
     col = gbuf.color.reshape(-1, 4)[pix]
     radii = np.sqrt(key_r2(keys).astype(np.float64))
@@ -346,10 +371,12 @@ def surfel_set(gbuf: GBuffer, keys: np.ndarray, meta: dict | None = None) -> Sur
     return SurfelSet.build(pos, nrm, linear_rgba_to_srgb8_f64(col), radii, info)
 
 
-def sample_mesh(mesh, n: int, views: int = 16, resolution: int = 512, seed: int = 0,
+def sample_mesh(mesh, n: int, views: int = 16, resolution: int | None = None, seed: int = 0,
                 progress: bool = False) -> SurfelSet:
-    """Blue surfels of a mesh: a file path, a ``trimesh.Trimesh`` or a TriangleSoup."""
-    _check_count(n)
+    """Blue surfels of a mesh: a file path, a ``trimesh.Trimesh`` or a TriangleSoup. ``resolution``
+    None: schedule.auto_resolution(n) (128 for 10k, 512 for 100k)."""
+    n = _check_count(n)
+    resolution = auto_resolution(n) if resolution is None else resolution
     if isinstance(mesh, TriangleSoup):
         soup = mesh
     elif hasattr(mesh, "faces") and hasattr(mesh, "vertices"):
@@ -359,16 +386,18 @@ def sample_mesh(mesh, n: int, views: int = 16, resolution: int = 512, seed: int 
     return sample_gbuffer(mesh_gbuffer(soup, views, resolution), n, seed, progress)
 
 
-def sample_scene(scene, n: int, views: int = 16, resolution: int = 512, seed: int = 0,
+def sample_scene(scene, n: int, views: int = 16, resolution: int | None = None, seed: int = 0,
                  progress: bool = False, name: str = "scene") -> SurfelSet:
     """Blue surfels of a parametric paramlod.Scene (G-buffers from the point renderer)."""
-    _check_count(n)
+    n = _check_count(n)
+    resolution = auto_resolution(n) if resolution is None else resolution
     return sample_gbuffer(scene_gbuffer(scene, views, resolution, name=name), n, seed, progress)
 
 
-def sample(source, n: int, views: int = 16, resolution: int = 512, seed: int = 0,
+def sample(source, n: int, views: int = 16, resolution: int | None = None, seed: int = 0,
            progress: bool = False) -> SurfelSet:
-    """Blue surfels of a mesh file, a scene file (.toml), a trimesh mesh or a paramlod.Scene."""
+    """Blue surfels of a mesh file, a scene file (.toml), a trimesh mesh or a paramlod.Scene
+    (``resolution`` None: chosen from n, see schedule.auto_resolution)."""
     if isinstance(source, Scene):
         return sample_scene(source, n, views, resolution, seed, progress)
     if isinstance(source, (str, Path)) and Path(source).suffix.lower() == ".toml":

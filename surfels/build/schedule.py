@@ -42,6 +42,25 @@ def splat_r2(r2max, slack=SPLAT_SLACK) -> np.float32:
     return np.float32(r2max) * np.float32(slack)
 
 
+def compact_sort(out: np.ndarray) -> np.ndarray:
+    """Survivor keys (non-zero entries of ``out``) in site order, then stably sorted by decreasing
+    radius: what the device's copy_if + radix sort produce (and the host path on CPU devices)."""
+    s = out[out != 0]
+    hi = (s >> np.uint64(32)).astype(np.uint32)
+    return s[np.argsort(~hi, kind="stable")]
+
+
+def auto_resolution(n: int) -> int:
+    """G-buffer resolution for n surfels when none is given: the smallest of 64, 128, 256, 512 with
+    at least 1.25 sqrt(n) pixels per side, else 512: 128 up to 10,485 surfels, 256 up to 41,943
+    (on the bunny about 1.5 pixels per final spacing at 10k and 100k; the relaxation moves
+    surfels off the pixel grid, and fewer pixels make the G-buffers and rounds cheaper)."""
+    for r in (64, 128, 256):
+        if r >= 1.25 * np.sqrt(n):
+            return r
+    return 512
+
+
 # --- levels -------------------------------------------------------------------------------------
 def level_strides(resolution: int) -> list[int]:
     """Strides from coarse to fine, ending with 1."""

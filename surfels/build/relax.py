@@ -1,0 +1,103 @@
+"""A final relaxation of the sampled surfels at the full count (host: numpy + scipy's cKDTree).
+
+Farthest-point rounds leave the full set less even than a Poisson-disk set: the last rounds split
+some cells and not others. Here every pair closer than D = ``spread`` x the mean nearest-neighbour
+distance is pushed apart by ``omega`` x its overlap (half each), in the tangent plane, and each
+surfel is put back on the surface: on the tangent plane of the covered G-buffer pixel under it in
+its pixel's view (the nearest covered pixel when that view loses it). The sampling order is kept
+and each surfel moves by a fraction of the full count's spacing, so a prefix of m surfels (spacing
+about sqrt(n / m) times larger) stays blue noise. Making early surfels heavier, so that later ones
+make the room, was tried: pairs stuck against early surfels and prefixes were no better.
+
+Host code only (no kernel, so no twin); deterministic: exact cKDTree queries, sums in fixed order.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+ITERATIONS = 16
+SPREAD = 1.05     # pairs closer than this times the mean nearest-neighbour distance repel
+OMEGA = 0.75      # fraction of a pair's overlap removed per iteration
+SAME_SIDE = 0.5   # a pixel whose normal is more than 60 deg from the surfel's lies on another sheet
+
+
+def pixel_under(gbuf, x: np.ndarray, q: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For surfels at x (n, 3) on pixels q (global indices): the pixel under x in q's view and
+    whether it is on the surfel's sheet (covered, normal within 60 deg, x within 2 pixels of its
+    tangent plane: not an occluder or a sheet behind). A lookup in the G-buffer: O(1) a surfel."""
+    k_, h, w = gbuf.shape
+    vs = gbuf.views
+    layer = q // (h * w)
+    r = x - vs.centre
+    a = np.einsum("ij,ij->i", r, vs.rights[layer]) * vs.scale + 0.5 * w
+    b = 0.5 * h - np.einsum("ij,ij->i", r, vs.ups[layer]) * vs.scale
+    xi, yi = np.floor(a).astype(np.int64), np.floor(b).astype(np.int64)
+    inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+    qn = np.where(inside, (layer * h + np.clip(yi, 0, h - 1)) * w + np.clip(xi, 0, w - 1), q)
+    return qn, _on_sheet(gbuf, x, qn, normal) & inside
+
+
+def _on_sheet(gbuf, x, qn, normal):
+    gp = gbuf.position.reshape(-1, 4)[qn]
+    gn = gbuf.normal.reshape(-1, 3)[qn].astype(np.float64)
+    return ((gp[:, 3] > 0) & (np.einsum("ij,ij->i", gn, normal) > SAME_SIDE)
+            & (np.abs(np.einsum("ij,ij->i", x - gp[:, :3], gn)) <= 2.0 * gbuf.views.pixel_size))
+
+
+class _Nearest:
+    """The nearest covered pixel (cKDTree over all of them), built the first time a surfel's own
+    view loses it (it moved past that view's silhouette)."""
+
+    def __init__(self, gbuf):
+        self.gbuf, self.tree, self.index = gbuf, None, None
+
+    def __call__(self, x):
+        from scipy.spatial import cKDTree
+
+        if self.tree is None:
+            self.index = np.flatnonzero(self.gbuf.valid.reshape(-1))
+            self.tree = cKDTree(self.gbuf.position.reshape(-1, 4)[self.index, :3])
+        return self.index[self.tree.query(x)[1]]
+
+
+def relax(gbuf, pix: np.ndarray, iterations: int = ITERATIONS, spread: float = SPREAD, omega: float = OMEGA):
+    """Relaxed positions (float64 (n, 3), in the given order) of the surfels on the pixels ``pix``
+    (global G-buffer indices, in sampling order), and the pixel each ends on (int64 (n,): its
+    normal and colour). A surfel with no pixel of its sheet under its new place (it would slide
+    past a border) stays where it was for that iteration."""
+    from scipy.spatial import cKDTree
+
+    gpos = gbuf.position.reshape(-1, 4)
+    gnrm = gbuf.normal.reshape(-1, 3)
+    q = np.asarray(pix, np.int64).copy()
+    p = gpos[q, :3].astype(np.float64)
+    n = len(p)
+    if n < 3 or iterations <= 0:
+        return p, q
+    d, _ = cKDTree(p).query(p, k=2)
+    D = spread * float(np.mean(d[:, 1]))
+    if not D > 0:
+        return p, q
+    nearest = _Nearest(gbuf)
+    plane_p, plane_n = gpos[q, :3].astype(np.float64), gnrm[q].astype(np.float64)
+    for _ in range(iterations):
+        pairs = cKDTree(p).query_pairs(D, output_type="ndarray")
+        if not len(pairs):
+            break
+        a, b = pairs[:, 0], pairs[:, 1]
+        v = p[a] - p[b]
+        length = np.sqrt(np.einsum("ij,ij->i", v, v))
+        f = (0.5 * omega * (D - length) / np.maximum(length, 1e-12 * D))[:, None] * v   # half each
+        disp = np.stack([np.bincount(a, f[:, i], n) - np.bincount(b, f[:, i], n) for i in range(3)], 1)
+        disp -= np.einsum("ij,ij->i", disp, plane_n)[:, None] * plane_n       # tangent plane only
+        x = p + disp
+        qn, ok = pixel_under(gbuf, x, q, plane_n)
+        lost = np.flatnonzero(~ok)
+        if len(lost):
+            qn[lost] = nearest(x[lost])
+            ok[lost] = _on_sheet(gbuf, x[lost], qn[lost], plane_n[lost])
+        q = np.where(ok, qn, q)
+        x = np.where(ok[:, None], x, p)                  # no pixel of its sheet under it: stay
+        plane_p, plane_n = gpos[q, :3].astype(np.float64), gnrm[q].astype(np.float64)
+        p = x - np.einsum("ij,ij->i", x - plane_p, plane_n)[:, None] * plane_n    # back on the surface
+    return p, q
