@@ -28,13 +28,14 @@ from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
-import pyopencl.array as cla
 
 from paramlod.app.args import add_size, check_folder, non_negative_int, positive_float, positive_int
+from paramlod.app.bench.functions import format_function_throughput, function_throughput
 from paramlod.app.bench.mesh_eval import SCENARIOS as EVAL_SCENARIOS, THRESHOLDS as EVAL_THRESHOLDS
 from paramlod.app.bench.mesh_eval import format_mesh_eval, plot_mesh_eval, run_mesh_eval
 from paramlod.app.bench.meshes import format_meshes, run_meshes
 from paramlod.app.bench.multiview import SCENES as MULTIVIEW_SCENES, VIEW_SETS, format_multiview, run_multiview
+from paramlod.app.bench.peers import add_arguments as add_peers_arguments, format_peers_markdown, run_peers
 from paramlod.app.bench.skinned import format_skinned, run_skinned
 from paramlod.app.bench.viewer import format_viewer, run_viewer
 from paramlod.app.bench.scenes import DEFAULT, SCENARIOS
@@ -44,8 +45,6 @@ from paramlod.device.context import cl_device
 from paramlod.device.programs import start_timing, stop_timing
 from paramlod.errors import ParamlodError
 from paramlod.function.programs import kernel
-from paramlod.function.registry import all_functions
-from paramlod.functions.sh_glyph import make_sh_glyph
 from paramlod.lod.stage import LodSettings
 from paramlod.pipeline.driver import render, render_on_device, scene_state
 from paramlod.pipeline.settings import RenderSettings
@@ -60,6 +59,7 @@ from paramlod.surfels.render import FixedCount, default_camera, render_surfels
 VARIANTS = {"points": ("points", None), "points-4xSS": ("points", "4xSS"), "points-ssaa": ("points-ssaa", None),
             "tess": ("tess", "noAA"), "tess-4xSS+8xMS": ("tess", "4xSS+8xMS")}
 DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8xMS"]
+NO_CULLING = "(no culling)"   # the label of rows measured with --culling off / both
 
 
 def add_arguments(p):
@@ -93,7 +93,13 @@ def add_arguments(p):
                    help="mesh-eval: frames of the slow move that measures popping (default 24)")
     p.add_argument("--eval-parts", type=non_negative_int, default=1000,
                    help="mesh-eval: parts of the many-parts mesh, 80 triangles each (default 1000; 0: none)")
+    p.add_argument("--culling", choices=["on", "off", "both"], default="on",
+                   help="the points variants' occlusion and back-face culling (both: every points row also "
+                        "without it, labelled 'no culling', for before/after ratios in one run; default on)")
+    p.add_argument("--cse-before", action="store_true",
+                   help="functions: also measure the generated code without the shared CSE (before/after)")
     p.add_argument("--out", default="out/bench", help="folder for results (default out/bench)")
+    add_peers_arguments(p)
 
 
 # --- ceilings ------------------------------------------------------------------------------------
@@ -171,9 +177,10 @@ def _device_buffers_mib(scene, size, ss: int = 1) -> float:
     return total / 2 ** 20
 
 
-def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size):
+def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling: bool = True):
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
+    rs.points.occlusion = rs.lod.backface_cull = culling
     rs.tess.l_max = l_max
     rs.tess.l_min = l_min
     if aa:
@@ -230,36 +237,16 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         # pixel statistics and read-back time of the extra frame read back
         out.update(pixels_written=pixels["pixels_written"], overdraw=pixels["overdraw"],
                    readback_ms=pixels["readback_ms"], image_readback_ms=pixels["image_readback_ms"])
+        # samples evaluated per pixel of the frame that shows something (issue #22's measure of waste)
+        out["samples_per_pixel"] = out["samples"] / max(pixels["pixels_written"], 1)
+        if "occlusion" in st[0]:
+            out["occlusion"] = {k: med(s["occlusion"][k] for s in st) for k in st[0]["occlusion"]}
         out["idle_ms"] = max(0.0, out["frame_ms"] - out["cl_kernel_ms"])
     out["fps"] = 1e3 / out["frame_ms"] if out["frame_ms"] > 0 else float("inf")
     return out
 
 
-# --- function throughput and surfels ---------------------------------------------------------------
-def function_throughput(nu=2048, nv=1024) -> list[dict]:
-    """OpenCL evaluation (positions) of every built-in, and of SH glyphs of each order."""
-    q = cl_device().queue
-    out_buf = cla.empty(q, nu * nv, np.float32)
-    fns = dict(all_functions())
-    fns.update({f"sh_glyph order {o}": make_sh_glyph(o) for o in (2, 4, 6, 8, 10, 12)})
-    rows = []
-    for name, fn in sorted(fns.items()):
-        k = kernel("eval_throughput", ["common/eval.cl"], [fn])
-        params = cla.to_device(q, np.concatenate([fn.param_block(), np.zeros(1, np.float32)]))
-        du = (fn.u_range[1] - fn.u_range[0]) / nu
-        dv = (fn.v_range[1] - fn.v_range[0]) / nv
-        best = None
-        for r in range(4):
-            evt = k(q, (nu, nv), None, np.uint32(0), np.float32(fn.u_range[0]), np.float32(du),
-                    np.float32(fn.v_range[0]), np.float32(dv), np.uint32(nu), params.data, out_buf.data)
-            evt.wait()
-            if r:
-                t = (evt.profile.end - evt.profile.start) * 1e-9
-                best = t if best is None else min(best, t)
-        rows.append({"function": name, "samples_per_s": nu * nv / best})
-    return rows
-
-
+# --- surfels ------------------------------------------------------------------------------------
 def surfel_costs(size) -> dict:
     try:
         mesh = str(importlib.resources.files("pymeshfix").joinpath("examples/StanfordBunny.ply"))
@@ -300,6 +287,11 @@ def run_bench(args) -> int:
         raise ParamlodError(f"unknown scenario(s) {', '.join(unknown)} (available: {', '.join(SCENARIOS)})")
     # the results folder is checked (made, and a file created in it) before anything is measured
     out = check_folder(Path(args.out), "--out", create=True)
+    if args.peers:
+        result = run_peers(args, out, log=lambda m: print(m, flush=True))
+        print(format_peers_markdown(result))
+        print(f"results: {out / 'peers.json'}, {out / 'peers.md'}")
+        return 0
     dev = cl_device()
     result = {"device": dev.name, "device_type": "GPU" if dev.is_gpu else "CPU", "host": platform.node(),
               "size": list(size), "frames": args.frames, "warmup": args.warmup, "scenarios": {}}
@@ -325,20 +317,24 @@ def run_bench(args) -> int:
                                                      "l_max": l_max, "l_min": l_min, "variants": {}})
         for vname in args.variants:
             variant, aa = VARIANTS[vname]
-            rows = per["variants"].setdefault(vname, [])
-            for dist in args.distances:
-                try:
-                    r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size)
-                except ParamlodError as exc:
-                    r = {"distance": dist, "error": str(exc)}
-                rows.append(r)
-                msg = (f"{name} {_row_label(vname, r)} d={dist}: " + (f"{r['frame_ms']:.2f} ms ({r['fps']:.0f} FPS), LOD "
-                       f"{r['lod_ms']:.2f}, render {r['render_ms']:.2f}, {r['render_patches']:.0f} patches"
-                       if "error" not in r else f"error: {r['error']}"))
-                print(msg, flush=True)
-                save()
+            for culling in {"on": (True,), "off": (False,), "both": (True, False)}[args.culling]:
+                key = vname if culling else f"{vname} {NO_CULLING}"
+                rows = per["variants"].setdefault(key, [])
+                for dist in args.distances:
+                    try:
+                        r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling)
+                    except ParamlodError as exc:
+                        r = {"distance": dist, "error": str(exc)}
+                    rows.append(r)
+                    msg = (f"{name} {_row_label(key, r)} d={dist}: " + (
+                        f"{r['frame_ms']:.2f} ms ({r['fps']:.0f} FPS), LOD {r['lod_ms']:.2f}, render "
+                        f"{r['render_ms']:.2f}, {r['render_patches']:.0f} patches"
+                        + (f", {r['samples_per_pixel']:.1f} samples/px" if "samples_per_pixel" in r else "")
+                        if "error" not in r else f"error: {r['error']}"))
+                    print(msg, flush=True)
+                    save()
     if "functions" in args.extras:
-        result["function_throughput"] = function_throughput()
+        result["function_throughput"] = function_throughput(before=args.cse_before)
         save()
     if "surfels" in args.extras:
         result["surfels"] = surfel_costs(size)
@@ -376,7 +372,7 @@ def run_bench(args) -> int:
 def _row_label(vname: str, r: dict) -> str:
     """The variant's name, and what it really ran when the device gave fewer samples than it asks
     (e.g. tess-4xSS+8xMS on a device of 4 MSAA samples), so that a row is never mislabelled."""
-    _, asked = VARIANTS.get(vname, (None, None))
+    _, asked = VARIANTS.get(vname.removesuffix(f" {NO_CULLING}"), (None, None))
     ran = r.get("aa_effective")
     return f"{vname} (ran {ran})" if asked and ran and str(ran) != asked else vname
 
@@ -396,12 +392,12 @@ def format_markdown(result) -> str:
         lines.append(f"Tessellation ceiling (sphere, level {t['level']}): {_rate(t['triangles_per_s'])} triangles/s.")
     if result["scenarios"]:
         lines += ["", "| scenario | variant | distance | FPS | frame ms (p95) | LOD ms | render ms | host ms | render patches "
-                  "| % of ceiling |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                  "| samples / written px | % of ceiling |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, sc in result["scenarios"].items():
         for vname, rows in sc["variants"].items():
             for r in rows:
                 if "error" in r:
-                    lines.append(f"| {name} | {vname} | {r['distance']} | error: {r['error'][:60]} |||||||")
+                    lines.append(f"| {name} | {vname} | {r['distance']} | error: {r['error'][:60]} ||||||||")
                     continue
                 frac = ""
                 if vname.startswith("points") and ceil:
@@ -409,13 +405,14 @@ def format_markdown(result) -> str:
                 elif vname.startswith("tess") and "tess_ceiling" in result and r.get("triangles"):
                     frac = f"{100 * r['triangles'] / (r['render_ms'] * 1e-3) / result['tess_ceiling']['triangles_per_s']:.1f}% tris"
                 host = "n/a" if r.get("host_ms") is None else f"{r['host_ms']:.2f}"
+                spp = f"{r['samples_per_pixel']:.1f}" if "samples_per_pixel" in r else ""
                 label = _row_label(vname, r)
                 lines.append(f"| {name} | {label} | {r['distance']} | {r['fps']:.0f} | {r['frame_ms']:.2f} "
                              f"({r['frame_ms_p95']:.2f}) | {r['lod_ms']:.2f} | {r['render_ms']:.2f} | {host} | "
-                             f"{r['render_patches']:.0f} | {frac} |")
+                             f"{r['render_patches']:.0f} | {spp} | {frac} |")
+    lines += format_culling(result["scenarios"])
     if "function_throughput" in result:
-        lines += ["", "| function | OpenCL samples/s |", "|---|---:|"]
-        lines += [f"| {r['function']} | {r['samples_per_s'] / 1e6:,.0f} M |" for r in result["function_throughput"]]
+        lines += format_function_throughput(result["function_throughput"])
     if "surfels" in result:
         s = result["surfels"]
         lines += ["", f"Blue surfels of the {s['mesh']}:", "",
@@ -434,6 +431,28 @@ def format_markdown(result) -> str:
     if "mesh_eval" in result:
         lines += format_mesh_eval(result["mesh_eval"])
     return "\n".join(lines) + "\n"
+
+
+def format_culling(scenarios: dict) -> list[str]:
+    """With --culling both: per scenario, variant and distance, FPS and samples per written pixel
+    with culling against without it, measured in the same run."""
+    lines = []
+    for name, sc in scenarios.items():
+        for vname, rows in sc["variants"].items():
+            off = sc["variants"].get(f"{vname} {NO_CULLING}")
+            if off is None:
+                continue
+            for on_r, off_r in zip(rows, off):
+                if "error" in on_r or "error" in off_r:
+                    continue
+                if not lines:
+                    lines = ["", "Culling (occlusion, back faces) against none, same run:", "",
+                             "| scenario | variant | distance | FPS off | FPS on | speed-up | samples/px off | on |",
+                             "|---|---|---:|---:|---:|---:|---:|---:|"]
+                spp = [f"{r['samples_per_pixel']:.1f}" if "samples_per_pixel" in r else "" for r in (off_r, on_r)]
+                lines.append(f"| {name} | {vname} | {on_r['distance']} | {off_r['fps']:.0f} | {on_r['fps']:.0f} | "
+                             f"{on_r['fps'] / off_r['fps']:.2f}x | {spp[0]} | {spp[1]} |")
+    return lines
 
 
 def make_plots(result, out: Path) -> list[Path]:

@@ -1,0 +1,171 @@
+"""`paramlod bench --peers` (paramlod/app/bench/peers.py): the silhouette metric and its reference,
+the matched-error view, rows for peers that are missing or fail, the markdown, a real paramlod row,
+and (only where the peer is importable, e.g. after pip install 'paramlod[peers]') real peer rows."""
+import argparse
+import json
+import math
+
+import numpy as np
+import pytest
+
+from paramlod.app.bench import peers as P
+from paramlod.dmri.sh import coefficient_count
+from paramlod.errors import ParamlodError
+
+
+def _args(*argv):
+    p = argparse.ArgumentParser()
+    P.add_arguments(p)
+    return p.parse_args(list(argv))
+
+
+def test_silhouette_error_of_known_masks():
+    a = np.zeros((20, 20), bool)
+    b = np.zeros((20, 20), bool)
+    a[5:15, 0:10] = True
+    b[5:15, 5:15] = True              # overlap 50 of a union of 150 pixels
+    assert P.silhouette_error(a, b) == pytest.approx(1 - 50 / 150)
+    assert P.silhouette_error(a, a) == 0.0
+    assert P.silhouette_error(np.zeros((4, 4), bool), np.zeros((4, 4), bool)) == 0.0
+    with pytest.raises(ParamlodError, match=r"\(20, 20\).*\(4, 4\)"):
+        P.silhouette_error(a, np.zeros((4, 4), bool))
+
+
+def test_coverage_counts_pixel_centres_inside_triangles():
+    # a square (1,1)-(5,5) as two triangles of opposite winding holds the centres 1.5 .. 4.5
+    xy = np.array([[1, 1], [5, 1], [5, 5], [1, 5]], float)
+    m = P.coverage_mask(xy, [[0, 1, 2], [0, 3, 2]], (8, 8))
+    want = np.zeros((8, 8), bool)
+    want[1:5, 1:5] = True
+    assert (m == want).all()
+    # a triangle spanning many pixels: centres with (i + .5) + (j + .5) <= 8, i.e. i + j <= 7: 36
+    big = P.coverage_mask(np.array([[0, 0], [8, 0], [0, 8]], float), [[0, 1, 2]], (10, 10))
+    assert big.sum() == 36 and big[7, 0] and not big[7, 1]
+    # a vertex behind the near plane drops the triangle
+    assert not P.coverage_mask(xy, [[0, 1, 2]], (8, 8), w=np.array([1.0, 1.0, -1.0, 1.0]), near=0.1).any()
+
+
+def test_reference_silhouette_of_a_sphere_is_the_analytic_disc():
+    spec = P.scene_spec("glyphs8", (64, 64), grid=1)
+    c = np.zeros((1, coefficient_count(8)))
+    c[0, 0] = math.sqrt(4 * math.pi)             # r = 1 everywhere: a sphere of radius 0.45
+    ref, info = P.reference_silhouette(spec, field=(c, np.zeros((1, 3))))
+    assert info["max_edge_px"] <= P.MAX_EDGE_PX + 1e-9
+    d = spec["camera"]["eye"][2]
+    j, i = np.mgrid[0:64, 0:64]
+    t = math.tan(math.radians(P.FOV / 2))
+    x, y = ((i + 0.5) / 32 - 1) * t, (1 - (j + 0.5) / 32) * t      # ray directions (x, y, -1)
+    inside = np.arccos(1 / np.sqrt(1 + x * x + y * y)) < math.asin(0.45 / d)
+    assert P.silhouette_error(ref, inside) < 0.01
+    assert P.silhouette_error(np.roll(ref, 1, axis=1), inside) > 0.05   # a one-pixel shift is seen
+
+
+def test_matched_error_picks_the_closest_resolution_and_the_time_ratio():
+    rows = [{"tool": "paramlod", "variant": "points", "scene": "torus", "ms": 10.0, "error": 0.05},
+            {"tool": "paramlod", "variant": "points", "scene": "glyphs8", "ms": 20.0, "error": 0.2}]
+    rows += [{"tool": "pyvista", "scene": "torus", "resolution": n, "ms": ms, "error": e, "variant": f"mesh {n}"}
+             for n, ms, e in ((16, 2.0, 0.3), (32, 4.0, 0.07), (64, 8.0, 0.04), (128, 30.0, 0.01))]
+    rows.append({"tool": "fury", "status": "not installed"})          # rows without times are ignored
+    m = P.matched(rows)
+    assert len(m) == 1
+    assert m[0]["resolution"] == 64 and m[0]["peer"] == "pyvista" and m[0]["scene"] == "torus"
+    assert m[0]["ratio"] == pytest.approx(0.8)
+
+
+def test_evenness_of_a_hexagonal_lattice_is_one():
+    d = 0.1
+    pts = np.array([[(i + 0.5 * (j % 2)) * d, j * d * math.sqrt(3) / 2, 0] for j in range(30) for i in range(30)])
+    area = len(pts) * math.sqrt(3) / 2 * d * d
+    e = P.evenness(pts, area)
+    assert e["min"] == pytest.approx(1.0) and e["mean"] == pytest.approx(1.0) and e["cv"] < 1e-9
+    clumped = P.evenness(np.concatenate([pts, pts[:10] + 0.01]), area)
+    assert clumped["min"] < 0.2 and clumped["cv"] > 0.1
+    with pytest.raises(ParamlodError, match="at least 2 points"):
+        P.evenness(pts[:1], area)
+
+
+def test_missing_peers_are_rows_with_their_pip_command(tmp_path, monkeypatch):
+    monkeypatch.setattr(P.importlib.util, "find_spec", lambda name: None)
+    result = P.run_peers(_args("--peers-tools", "pyvista", "fury", "open3d", "pymeshlab"), tmp_path, log=lambda m: None)
+    assert [r["tool"] for r in result["missing"]] == ["pyvista", "fury", "open3d", "pymeshlab"]
+    assert not result["render"] and not result["sampling"] and not result["failed"]
+    md = (tmp_path / "peers.md").read_text()
+    assert "pyvista: not installed (pip install pyvista==0.49.2 vtk==9.7.2)" in md
+    assert "fury: not installed (pip install fury==2.0.0)" in md
+    assert json.loads((tmp_path / "peers.json").read_text())["missing"][2]["install"].startswith("pip install open3d")
+
+
+def test_a_peer_that_fails_is_a_one_line_row():
+    if P.importlib.util.find_spec("pyvista") is not None:
+        pytest.skip("pyvista is installed here: its worker would not fail")
+    row = P.run_worker("pyvista", {"scenes": [P.scene_spec("torus", (16, 16))], "frames": 1, "warmup": 0}, timeout=120)
+    assert isinstance(row, dict) and row["status"].startswith("failed (exit 1): ModuleNotFoundError")
+    assert "Traceback" not in row["status"] and "xvfb" in row["hint"]
+
+
+def test_bad_size_and_scene_are_named():
+    with pytest.raises(ParamlodError, match="--peers-size must be square.*640x480"):
+        P.scene_spec("torus", (640, 480))
+    with pytest.raises(ParamlodError, match="unknown peers scene 'cube'"):
+        P.scene_spec("cube", (64, 64))
+
+
+def test_markdown_has_time_and_error_side_by_side():
+    result = {"size": [64, 64], "frames": 3, "warmup": 1,
+              "render": [{"tool": "paramlod", "version": "0.1.0", "variant": "points", "scene": "torus", "ms": 12.34,
+                          "error": 0.0456},
+                         {"tool": "pyvista", "version": "pyvista 0.49.2 / vtk 9.7.2", "variant": "mesh 64",
+                          "scene": "torus", "resolution": 64, "ms": 3.21, "error": 0.0401}],
+              "sampling": [{"tool": "open3d", "version": "open3d 0.20.0", "n": 10000, "got": 10000, "seconds": 0.5,
+                            "all": {"min": 0.74, "mean": 0.9, "cv": 0.077}, "prefix": {"min": 0.1, "mean": 0.5, "cv": 0.5}}],
+              "missing": [{"tool": "fury", "status": "not installed", "install": "pip install fury==2.0.0"}],
+              "failed": [{"tool": "pymeshlab", "status": "timed out after 900 s", "hint": ""}]}
+    result["matched"] = P.matched(result["render"])
+    md = P.format_peers_markdown(result)
+    assert "| torus | paramlod | 0.1.0 | points | 12.3 | 0.046 |" in md
+    assert "| torus | pyvista | pyvista 0.49.2 / vtk 9.7.2 | mesh 64 | 3.2 | 0.040 |" in md
+    assert "| torus | points | 12.3 | 0.046 | pyvista | 64 | 3.2 | 0.040 | 0.26 |" in md
+    assert "| open3d | open3d 0.20.0 | 10,000 | 10,000 | 0.50 | 0.74 | 0.077 | 0.10 | 0.500 |" in md
+    assert "fury: not installed (pip install fury==2.0.0)" in md and "pymeshlab: timed out after 900 s" in md
+
+
+def test_a_real_paramlod_row(tmp_path):
+    result = P.run_peers(_args("--peers-tools", "paramlod", "--peers-scenes", "torus", "--peers-size", "64x64",
+                               "--peers-frames", "1", "--peers-samples"), tmp_path, log=lambda m: None)
+    rows = {r["variant"]: r for r in result["render"]}
+    assert set(rows) == {"points", "tess"} and result["references"]["torus"]["vertices"] > 10_000
+    for r in rows.values():
+        assert r["tool"] == "paramlod" and r["scene"] == "torus" and r["ms"] > 0
+        assert r["error"] < 0.12              # a torus of ~50 px drawn by either variant
+    assert "| torus | paramlod |" in (tmp_path / "peers.md").read_text()
+
+
+# --- real peers: run where they are importable (pip install 'paramlod[peers]'), skipped elsewhere -----------
+def _torus_errors(render):
+    spec = P.scene_spec("torus", (64, 64))
+    ref, _ = P.reference_silhouette(spec)
+    return [P.silhouette_error(render(spec, n, 1, 1)[1], ref) for n in (8, 128)]
+
+
+def test_pyvista_draws_the_reference_silhouette():
+    pytest.importorskip("pyvista")
+    coarse, fine = _torus_errors(P.pyvista_render)
+    assert fine < 0.01 < coarse        # same camera and pixel rule as the reference
+
+
+def test_fury_draws_the_reference_silhouette():
+    pytest.importorskip("fury")
+    coarse, fine = _torus_errors(P.fury_render)
+    assert fine < 0.01 < coarse
+
+
+@pytest.mark.parametrize("tool", ["open3d", "pymeshlab"])
+def test_poisson_disk_peers_sample_the_bunny_evenly(tool):
+    pytest.importorskip(tool)
+    pytest.importorskip("pymeshfix")
+    import trimesh
+
+    path = P.bunny_path()
+    sec, pts = P.SAMPLERS[tool](path, 2000)
+    row = P.sampling_row(tool, P.peer_versions(tool), 2000, sec, pts, float(trimesh.load(path, force="mesh").area))
+    assert abs(row["got"] - 2000) < 100 and row["all"]["min"] > 0.3 and row["all"]["cv"] < 0.2
