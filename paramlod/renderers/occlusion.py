@@ -6,7 +6,7 @@ the depth pyramid of the previous frame's keys and is drawn (phase 1) or deferre
 this frame's keys after phase 1 then re-tests the deferred patches, and the ones not behind it are
 drawn too (phase 2). Keys only get nearer during a frame, so phase 2 never culls a patch that could
 change a key, and a wrong guess in phase 1 (camera motion, animation, a first frame) costs only
-time. A pyramid of the frame's final keys is kept for the next frame.
+time. That pyramid is the next frame's guess.
 """
 from __future__ import annotations
 
@@ -90,9 +90,10 @@ class OcclusionCuller:
         self._counts = np.zeros(len(COUNTS), np.uint32)
         self.capacity = 0
         self.bounds = self.early = self.late = self.deferred = None
-        self.previous = self.current = None   # DepthPyramid: last frame's final keys, this frame's after phase 1
+        self.previous = self.current = None   # DepthPyramid: last frame's keys after its phase 1, this frame's
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
         self.events = []
+        self.guessed = False   # the last phase 1 tested against a previous frame's pyramid
 
     def _ensure(self, capacity: int, size):
         ctx = cl_device().context
@@ -116,6 +117,7 @@ class OcclusionCuller:
         q = cl_device().queue
         cl.enqueue_fill_buffer(q, self.counts_buf, np.uint32(0), 0, 4 * len(COUNTS))
         prev = self.previous
+        self.guessed = prev.valid
         self.first_k.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), *inst, cam_buf,
                               np.float32(widen), prev.buf, np.uint32(len(prev.levels) if prev.valid else 0),
                               self.bounds, self.early, self.deferred, self.counts_buf)
@@ -133,8 +135,16 @@ class OcclusionCuller:
         items = min(-(-max(int(capacity), 1) // LOCAL), self.max_groups) * LOCAL
         self.events.append(launch(q, self.second_k, (items,), (LOCAL,)))
 
+    def swap(self):
+        """This frame's pyramid (after phase 1) becomes the next frame's guess: one pyramid build a
+        frame instead of two (a pyramid of the final keys would be tighter only by what phase 2
+        drew, which phase 2 catches anyway)."""
+        self.previous, self.current = self.current, self.previous
+
     def enqueue_keep(self, keys):
         """The pyramid of the frame's final keys, for the next frame's phase 1."""
+        if self.previous is None or self.previous.size != (keys.width, keys.height):
+            self.previous = DepthPyramid(self.program, keys.width, keys.height)
         self.events += self.previous.enqueue_build(keys)
 
     def read_counts(self):

@@ -43,9 +43,10 @@ class PointSettings:
     # resolve each block (colour averaged over covered subsamples, alpha = coverage); 1 = off
     supersample: int = 1
     color_by: str = "material"   # the direct variant's debug colouring: "patch" or "level" (LOD step)
-    # the direct variant's two-phase occlusion culling of render patches (docs/points.md): the
-    # same keys with fewer samples; single-view frames only
-    occlusion: bool = True
+    # the direct variant's two-phase occlusion culling of render patches (docs/points.md, the
+    # same keys with fewer samples; single-view frames only): True always, False never, "auto"
+    # while it culls enough to pay (paramlod/renderers/points.py AUTO_MIN_OCCLUDED)
+    occlusion: bool | str = "auto"
 
     def validate(self):
         if not 0.1 <= self.density <= 16:
@@ -63,8 +64,8 @@ class PointSettings:
         if self.supersample not in (1, 2, 3, 4) or isinstance(self.supersample, bool):
             raise SceneError(f"points supersample must be 1 (off), 2, 3 or 4 subsamples per pixel side, "
                              f"got {self.supersample!r}")
-        if not isinstance(self.occlusion, bool):
-            raise SceneError(f"points occlusion must be true or false, got {self.occlusion!r}")
+        if not (isinstance(self.occlusion, bool) or self.occlusion == "auto"):
+            raise SceneError(f"points occlusion must be true, false or \"auto\", got {self.occlusion!r}")
         if self.color_by not in COLOR_BY:
             raise SceneError(f"points color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
 

@@ -15,7 +15,7 @@ from paramlod.lod.reference import _world
 from paramlod.pipeline.driver import scene_state
 from paramlod.renderers.occlusion import DepthPyramid, pyramid_levels
 from paramlod.renderers.occlusion_reference import depth_pyramid, occluded, patch_bounds
-from paramlod.renderers.points import DirectPointRenderer
+from paramlod.renderers.points import AUTO_MIN_OCCLUDED, AUTO_PROBE, DirectPointRenderer
 from paramlod.renderers.targets import KeyBuffer
 from paramlod.scene.framing import framing_camera
 
@@ -44,7 +44,7 @@ def wall_scene(front="sphere"):
     return s
 
 
-def settings(occlusion: bool, ss: int = 1) -> pl.RenderSettings:
+def settings(occlusion, ss: int = 1) -> pl.RenderSettings:
     rs = pl.RenderSettings()
     rs.lod.threshold = (8.0, 8.0)
     rs.points.occlusion = occlusion
@@ -208,5 +208,27 @@ def test_multi_view_frames_and_occlusion_off_draw_in_one_pass():
     assert "occlusion" not in pl.render(scene, cam, "points", settings(False)).stats
     views = pl.render_views(scene, [cam, camera(0.5)], "points", settings(True))
     assert all("occlusion" not in f.stats for f in views)
-    with pytest.raises(pl.SceneError, match="occlusion must be true or false"):
+    with pytest.raises(pl.SceneError, match="occlusion must be true, false or \"auto\""):
         pl.PointSettings(occlusion="yes").validate()
+
+
+def test_auto_culls_while_it_pays_and_probes_again():
+    """occlusion = "auto" (the default): a lone plane hides nothing, so after one frame that had
+    a pyramid to test, frames are drawn in one pass until the probe AUTO_PROBE frames later; the
+    wall of spheres hides most tori, so it is culled every frame. Images equal those without."""
+    assert pl.PointSettings().occlusion == "auto"
+    lone = pl.Scene()
+    lone.add("plane")
+    frames = [pl.render(lone, camera(), "points", settings("auto")) for _ in range(AUTO_PROBE + 2)]
+    culled = ["occlusion" in f.stats for f in frames]
+    # frame 0 has no pyramid (it cannot judge), frame 1 finds nothing occluded, the probe comes at 1 + AUTO_PROBE
+    assert culled == [True, True] + [False] * (AUTO_PROBE - 1) + [True]
+    off = pl.render(lone, camera(), "points", settings(False)).materialize()
+    for f in (frames[1], frames[2], frames[-1]):
+        f = f.materialize()
+        for name in OUTPUTS:
+            assert np.array_equal(getattr(f, name), getattr(off, name), equal_nan=True), name
+    wall = wall_scene()
+    stats = [pl.render(wall, camera(), "points", settings("auto")).stats for _ in range(4)]
+    assert all("occlusion" in st for st in stats)
+    assert stats[-1]["occlusion"]["occluded"] >= AUTO_MIN_OCCLUDED * stats[-1]["render_patches"]

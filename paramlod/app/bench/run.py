@@ -180,7 +180,8 @@ def _device_buffers_mib(scene, size, ss: int = 1) -> float:
 def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling: bool = True):
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
-    rs.points.occlusion = rs.lod.backface_cull = culling
+    if not culling:   # on: the defaults (occlusion "auto", back faces of one-sided materials)
+        rs.points.occlusion = rs.lod.backface_cull = False
     rs.tess.l_max = l_max
     rs.tess.l_min = l_min
     if aa:
@@ -239,8 +240,10 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
                    readback_ms=pixels["readback_ms"], image_readback_ms=pixels["image_readback_ms"])
         # samples evaluated per pixel of the frame that shows something (issue #22's measure of waste)
         out["samples_per_pixel"] = out["samples"] / max(pixels["pixels_written"], 1)
-        if "occlusion" in st[0]:
-            out["occlusion"] = {k: med(s["occlusion"][k] for s in st) for k in st[0]["occlusion"]}
+        culled = [s["occlusion"] for s in st if "occlusion" in s]   # "auto" culls some frames
+        if culled:
+            out["occlusion"] = {k: med(c[k] for c in culled) for k in culled[0]}
+            out["occlusion"]["culled_frames"] = len(culled)
         out["idle_ms"] = max(0.0, out["frame_ms"] - out["cl_kernel_ms"])
     out["fps"] = 1e3 / out["frame_ms"] if out["frame_ms"] > 0 else float("inf")
     return out
