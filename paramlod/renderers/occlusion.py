@@ -141,12 +141,6 @@ class OcclusionCuller:
         drew, which phase 2 catches anyway)."""
         self.previous, self.current = self.current, self.previous
 
-    def enqueue_keep(self, keys):
-        """The pyramid of the frame's final keys, for the next frame's phase 1."""
-        if self.previous is None or self.previous.size != (keys.width, keys.height):
-            self.previous = DepthPyramid(self.program, keys.width, keys.height)
-        self.events += self.previous.enqueue_build(keys)
-
     def read_counts(self):
         cl.enqueue_copy(cl_device().queue, self._counts, self.counts_buf, is_blocking=False)
 

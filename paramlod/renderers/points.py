@@ -20,12 +20,38 @@ from paramlod.function.programs import build
 
 LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
-# occlusion = "auto": culling stays on while phase 2 culls at least this share of the render
-# patches; otherwise the next AUTO_PROBE - 1 frames are drawn in one pass and then culling is tried
-# again. Measured on the H200 (docs/points.md): culling that removed 6 % of the samples cost 7 %
-# of the frame, 13-30 % paid 1.18-1.38x; the pyramids and the second pass are ~0.3-0.6 ms a frame.
-AUTO_MIN_OCCLUDED = 0.1
-AUTO_PROBE = 16
+# occlusion = "auto": culling is used while it saves at least this share of a frame's samples
+# (measured on the H200, docs/points.md: culling that removed 6 % of the samples cost 7 % of the
+# frame, 13-30 % paid 1.18-1.38x; the pyramid and the second pass cost 0.3-0.6 ms a frame)
+AUTO_MIN_SAVED = 0.1
+AUTO_PROBE = 16   # every 16th frame is drawn the other way, so the choice follows camera and scene
+
+
+class AutoOcclusion:
+    """The choice of occlusion = "auto", frame by frame: the samples of the last frame drawn with
+    culling and of the last one drawn without it are compared; each kind is drawn once first, and
+    every AUTO_PROBE-th frame the kind not chosen is drawn again."""
+
+    def __init__(self):
+        self.samples = {True: None, False: None}
+        self.on = True
+        self.since = 0   # frames since the last probe
+
+    def cull(self) -> bool:
+        """Whether the next frame is drawn with culling."""
+        for kind in (True, False):
+            if self.samples[kind] is None:
+                return kind
+        return (not self.on) if self.since >= AUTO_PROBE - 1 else self.on
+
+    def record(self, culled: bool, samples: int, judged: bool = True):
+        """A frame drawn (``judged`` False: culled without a pyramid to test against, which says
+        nothing of what culling saves)."""
+        self.since = 0 if culled != self.on else self.since + 1
+        if judged:
+            self.samples[culled] = samples
+        if None not in self.samples.values():
+            self.on = self.samples[True] < (1 - AUTO_MIN_SAVED) * self.samples[False]
 
 
 class _Launch:
@@ -138,7 +164,8 @@ class DirectPoints:
         # the recording test hook indexes samples by render-list place: no culling with it
         self.occlusion = None if record else OcclusionCuller(self.points.program)
         self.culled = False   # the last frame was drawn in two occlusion phases
-        self._skip = 0        # "auto": frames still to draw without culling
+        self.auto_frame = False   # the last frame's culling was chosen by self.auto
+        self.auto = AutoOcclusion()
         self.dev = None
 
     def prepare(self, scene, camera, settings):
@@ -152,14 +179,11 @@ class DirectPoints:
         draw = (d["inst"], d["materials"], d["cam"], d["light"], target, settings.points)
         mode = settings.points.occlusion
         self.culled = self.occlusion is not None and mode is not False and d["n_views"] == 1 \
-            and (mode is True or self._skip == 0)
+            and (mode is True or self.auto.cull())
+        self.auto_frame = mode == "auto" and self.occlusion is not None and d["n_views"] == 1
         if not self.culled:
             pts.enqueue(lod.render.buf, lod.counters, LOD_RENDER_TOTAL, lod.render.capacity, *draw,
                         n_views=d["n_views"], view_masks=lod.render_views.buf)
-            if self._skip > 0:
-                self._skip -= 1
-                if self._skip == 0:   # the next frame tries culling: give its phase 1 this frame's depths
-                    self.occlusion.enqueue_keep(target)
             return
         occ, cap = self.occlusion, lod.render.capacity
         occ.enqueue_first(lod.render.buf, lod.counters, LOD_RENDER_TOTAL, cap, d["inst"], d["cam"],
@@ -189,9 +213,8 @@ class DirectPoints:
                                 "occluded": c["deferred"] - c["late"]}
             first, last = self.occlusion.events[0], self.points.events[-1]
             out["ms"]["render"] = (last.profile.end - first.profile.start) * 1e-6
-            # "auto": a frame whose phase 1 had a pyramid to test against says whether culling pays
-            if self.occlusion.guessed and c["deferred"] - c["late"] < AUTO_MIN_OCCLUDED * n:
-                self._skip = AUTO_PROBE - 1
+        if self.auto_frame:
+            self.auto.record(self.culled, out["samples"], not self.culled or self.occlusion.guessed)
         return out
 
 

@@ -45,7 +45,7 @@ class PointSettings:
     color_by: str = "material"   # the direct variant's debug colouring: "patch" or "level" (LOD step)
     # the direct variant's two-phase occlusion culling of render patches (docs/points.md, the
     # same keys with fewer samples; single-view frames only): True always, False never, "auto"
-    # while it culls enough to pay (paramlod/renderers/points.py AUTO_MIN_OCCLUDED)
+    # while it saves enough samples to pay (paramlod/renderers/points.py AutoOcclusion)
     occlusion: bool | str = "auto"
 
     def validate(self):

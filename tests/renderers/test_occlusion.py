@@ -15,7 +15,7 @@ from paramlod.lod.reference import _world
 from paramlod.pipeline.driver import scene_state
 from paramlod.renderers.occlusion import DepthPyramid, pyramid_levels
 from paramlod.renderers.occlusion_reference import depth_pyramid, occluded, patch_bounds
-from paramlod.renderers.points import AUTO_MIN_OCCLUDED, AUTO_PROBE, DirectPointRenderer
+from paramlod.renderers.points import AUTO_MIN_SAVED, AUTO_PROBE, AutoOcclusion, DirectPointRenderer
 from paramlod.renderers.targets import KeyBuffer
 from paramlod.scene.framing import framing_camera
 
@@ -213,22 +213,43 @@ def test_multi_view_frames_and_occlusion_off_draw_in_one_pass():
 
 
 def test_auto_culls_while_it_pays_and_probes_again():
-    """occlusion = "auto" (the default): a lone plane hides nothing, so after one frame that had
-    a pyramid to test, frames are drawn in one pass until the probe AUTO_PROBE frames later; the
-    wall of spheres hides most tori, so it is culled every frame. Images equal those without."""
+    """occlusion = "auto" (the default): a lone plane hides nothing, so once a culled frame (with a
+    pyramid to test against) and an unculled one have been compared, frames are drawn in one pass
+    until the probe; the wall of spheres hides most tori, so culling stays on. Images equal those
+    drawn without culling."""
     assert pl.PointSettings().occlusion == "auto"
     lone = pl.Scene()
     lone.add("plane")
-    frames = [pl.render(lone, camera(), "points", settings("auto")) for _ in range(AUTO_PROBE + 2)]
+    frames = [pl.render(lone, camera(), "points", settings("auto")) for _ in range(AUTO_PROBE + 4)]
     culled = ["occlusion" in f.stats for f in frames]
-    # frame 0 has no pyramid (it cannot judge), frame 1 finds nothing occluded, the probe comes at 1 + AUTO_PROBE
-    assert culled == [True, True] + [False] * (AUTO_PROBE - 1) + [True]
+    # frame 0 has no pyramid (it cannot judge), 1 is culled, 2 is not: then one pass until the probe
+    assert culled[:3] == [True, True, False]
+    probe = 3 + culled[3:].index(True)
+    assert culled[3:probe] == [False] * (probe - 3) and probe - 2 == AUTO_PROBE
     off = pl.render(lone, camera(), "points", settings(False)).materialize()
-    for f in (frames[1], frames[2], frames[-1]):
+    for f in (frames[1], frames[2], frames[probe]):
         f = f.materialize()
         for name in OUTPUTS:
             assert np.array_equal(getattr(f, name), getattr(off, name), equal_nan=True), name
     wall = wall_scene()
-    stats = [pl.render(wall, camera(), "points", settings("auto")).stats for _ in range(4)]
-    assert all("occlusion" in st for st in stats)
-    assert stats[-1]["occlusion"]["occluded"] >= AUTO_MIN_OCCLUDED * stats[-1]["render_patches"]
+    stats = [pl.render(wall, camera(), "points", settings("auto")).stats for _ in range(6)]
+    assert ["occlusion" in st for st in stats] == [True, True, False, True, True, True]
+    assert stats[-1]["samples"] < (1 - AUTO_MIN_SAVED) * stats[2]["samples"]
+
+
+def test_auto_choice_follows_the_samples():
+    auto = AutoOcclusion()
+    assert auto.cull()
+    auto.record(True, 900, judged=False)   # a first frame: nothing to judge by
+    assert auto.cull()
+    auto.record(True, 900)
+    assert not auto.cull()                 # the other kind is measured once
+    auto.record(False, 950)                # culling saved 5 %: not enough
+    assert not auto.on and not auto.cull()
+    for _ in range(AUTO_PROBE - 2):
+        auto.record(False, 950)
+    assert not auto.cull()
+    auto.record(False, 950)
+    assert auto.cull()                     # the probe, AUTO_PROBE frames after the last
+    auto.record(True, 500)                 # now culling saves half
+    assert auto.on and auto.cull()
