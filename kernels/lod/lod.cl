@@ -101,6 +101,25 @@ inline void grow_box(float4* box, Sample s) {
 #define BOUNDARY_CAP 2.0f
 // A line with bad and good samples splits while its good segments are longer than this (pixels).
 #define MIXED_MIN_PX 1.0f
+// Detail between the samples (twin: reference.line_turns): a measured line whose consecutive
+// world-space segments turn by more than LodSettings.detail_angle (curve_cos: its cosine) does not
+// resolve the surface along it (a thin SH lobe, a shell's nodule: the segments cut across it, and
+// the measure and the tessellation level taken from them fall short: lobes drawn short, holes in
+// the point grid). Such a line splits the patch across it as a long line does, while it is longer
+// than CURVE_MIN_PX on screen (about a pixel a segment). A sphere's or torus' whole circle turns
+// 51.4 degrees a segment and never splits for it.
+#define CURVE_MIN_PX 7.0f
+inline bool line_turns(__local const float4* w, uint first, float curve_cos) {
+    bool turns = false;
+    float3 a = w[first + 1u].xyz - w[first].xyz;
+    for (uint j = 1u; j < 7u; ++j) {
+        float3 b = w[first + j + 1u].xyz - w[first + j].xyz;
+        bool good = w[first + j - 1u].w == 0.0f && w[first + j].w == 0.0f && w[first + j + 1u].w == 0.0f;
+        turns = turns || (good && dot(a, b) < curve_cos * (length(a) * length(b)));
+        a = b;
+    }
+    return turns;
+}
 // The share of a boundary's need the raise asks for. The point renderer's default density (1.5
 // samples per measured pixel, steps of 0.67 px) leaves a margin below the hole-free step of
 // 1/sqrt(2) px; the boundary, measured at its end rather than estimated from segment averages,
@@ -366,7 +385,8 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
               __global const float* inst_f, __global const uint* inst_u,
               __global const float* params, __global const float* cam, uint n_views,
               float t_u, float t_v, uint step, uint force,
-              uint backface, float widen)   // back-face culling on; the sampling range's widening
+              uint backface, float widen,   // back-face culling on; the sampling range's widening
+              float curve_cos)   // cos of LodSettings.detail_angle (line_turns)
 {
     __local float4 wpos[LOD_SAMPLES];                      // world position; w: 1 for a bad sample
     __local float2 pos[LOD_SLOTS * LOD_SAMPLES];           // screen positions of a chunk's views
@@ -468,6 +488,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                     // ... while its good part is longer than a pixel: past that, the undefined rest of the
                     // line beside it is sub-pixel too (a finite edge, as a dome's rim, stops splitting there)
                     if (n_bad > 0u && n_bad < 8u && sum > MIXED_MIN_PX) atomic_or(&comb[12], 1u << k);
+                    if (sum > CURVE_MIN_PX && line_turns(wpos, k * 8u, curve_cos)) atomic_or(&comb[12], 1u << k);
                     // the line's speed at its two ends (on the patch's edges across it), from its first and
                     // last two segments: 7 segments span the line, so 7 x a segment is a whole-line measure
                     float need = 7.0f * fmax(edge_extrapolate(seg[0], seg[1]), edge_extrapolate(seg[6], seg[5]));

@@ -34,6 +34,7 @@ from paramlod.surfels.render import FixedCount, FixedSize
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation", "camera_path"}   # camera_path: docs/scale-out.md
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches", "patch_budget",
+               "detail_angle",
                "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "two_sided", "translate", "rotate", "scale", "matrix", "variant",
                "instances", "sh_field", "surfels", "mesh", "lod", "skinned", "animation", "time"}
@@ -176,7 +177,9 @@ def load_scene(path, size=None) -> SceneFile:
                         initial_grid=tuple(grid),
                         max_patches=ck.num(r, "max_patches", "render", "render", default=1 << 24, lo=1, integer=True),
                         patch_budget=ck.num(r, "patch_budget", "render", "render", default=LodSettings.patch_budget,
-                                            lo=1, integer=True)),
+                                            lo=1, integer=True),
+                        detail_angle=ck.num(r, "detail_angle", "render", "render", default=LodSettings.detail_angle,
+                                            lo=1, hi=180)),
         points=PointSettings(density=ck.num(r, "density", "render", "render", default=PointSettings.density, lo=0.1, hi=16)))
     background = ck.vec(r, "background", 3, "render", "render", default=[0.12, 0.12, 0.14])
     settings.tess = _tess_settings(r, ck)

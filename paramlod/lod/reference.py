@@ -78,6 +78,7 @@ def _seg(s, state):
 
 BOUNDARY_CAP = F(2.0)   # kernels/lod/lod.cl BOUNDARY_CAP
 MIXED_MIN_PX = F(1.0)   # kernels/lod/lod.cl MIXED_MIN_PX
+CURVE_MIN_PX = F(7.0)   # kernels/lod/lod.cl CURVE_MIN_PX
 BOUNDARY_SHARE = F(0.9428090)   # kernels/lod/lod.cl BOUNDARY_SHARE: sqrt(2) / 1.5
 
 
@@ -117,9 +118,23 @@ def boundary_measures(seg_u, seg_v, s_g, st_g, msu_line, msv_line):
     return raise_measure(su, nu_b), raise_measure(sv, nv_b)
 
 
-def _view_measures(rows, cols, grid):
+def line_turns(w, bad, curve_cos) -> np.ndarray:
+    """Twin of line_turns() in lod.cl: per line of 8 world positions (..., 8, 3), whether two
+    consecutive segments with good ends turn by more than the angle whose cosine is ``curve_cos``."""
+    with np.errstate(invalid="ignore", over="ignore"):   # bad samples (NaN, inf) are left out below
+        d = (w[..., 1:, :] - w[..., :-1, :]).astype(np.float32)                      # (..., 7, 3)
+        a, b = d[..., :-1, :], d[..., 1:, :]
+        dot = (a * b).sum(axis=-1, dtype=np.float32)
+        la = np.sqrt((a * a).sum(axis=-1, dtype=np.float32))
+        lb = np.sqrt((b * b).sum(axis=-1, dtype=np.float32))
+        turn = dot < F(curve_cos) * (la * lb).astype(np.float32)
+    good = ~(bad[..., :-2] | bad[..., 1:-1] | bad[..., 2:])
+    return (turn & good).any(axis=-1)
+
+
+def _view_measures(rows, cols, grid, turns=None):
     """One view's measures of n patches from its projected samples ((s, state, code) of the
-    u-lines, the v-lines (n, 4, 8) and the 5x5 grid (n, 5, 5)): code (n,), eu, ev (n, 4), msu,
+    u-lines, the v-lines (n, 4, 8) and the 5x5 grid (n, 5, 5); turns: (n, 8) line_turns of the lines): code (n,), eu, ev (n, 4), msu,
     msv, w_u, w_v (n,), mixed (n, 8: u-lines then v-lines), box (n, 4)."""
     (s_r, st_r, c_r), (s_c, st_c, c_c), (s_g, st_g, c_g) = rows, cols, grid
     n = len(s_r)
@@ -142,6 +157,8 @@ def _view_measures(rows, cols, grid):
     bad_r, bad_c = (st_r == 2).sum(axis=2), (st_c == 2).sum(axis=2)    # (n, 4) per line
     mixed = np.concatenate([(bad_r > 0) & (bad_r < 8) & (eu > MIXED_MIN_PX),   # ... while the good part
                             (bad_c > 0) & (bad_c < 8) & (ev > MIXED_MIN_PX)], axis=1)   # is over a pixel
+    if turns is not None:   # lines whose samples do not resolve the surface (lod.cl line_turns)
+        mixed |= turns & (np.concatenate([eu, ev], axis=1) > CURVE_MIN_PX)
     return {"code": code, "eu": eu, "ev": ev, "msu": seg_u.max(axis=(1, 2)), "msv": seg_v.max(axis=(1, 2)),
             "w_u": w_u, "w_v": w_v, "mixed": mixed, "box": box}
 
@@ -154,7 +171,7 @@ def _most(x, seen):
     return np.where(seen, bits, np.uint32(0)).max(axis=0).view(np.float32)
 
 
-def _measure(patches, scene_inst, functions, cam) -> dict:
+def _measure(patches, scene_inst, functions, cam, curve_cos=F(-2)) -> dict:
     """Every view's measures of ``patches`` (as lod_step's kernel: f once per sample, then every
     view): a dict of arrays (views, n, ...)."""
     n = len(patches)
@@ -176,7 +193,8 @@ def _measure(patches, scene_inst, functions, cam) -> dict:
     ii = np.broadcast_to(inst[:, None, None], (n, 4, 8))
     world = (_world(scene_inst, functions, ii, ru, rv), _world(scene_inst, functions, ii, cu, cv),
              _world(scene_inst, functions, np.broadcast_to(inst[:, None, None], (n, 5, 5)), gu, gv))
-    per_view = [_view_measures(*(_project(w, bad, c) for w, bad in world)) for c in camera_rows(cam)]
+    turns = np.concatenate([line_turns(*world[0], curve_cos), line_turns(*world[1], curve_cos)], axis=1)   # (n, 8)
+    per_view = [_view_measures(*(_project(w, bad, c) for w, bad in world), turns) for c in camera_rows(cam)]
     return {k: np.stack([pv[k] for pv in per_view]) for k in per_view[0]}
 
 
@@ -203,14 +221,15 @@ def backfacing(patches, scene_inst, functions, cams, seen, widen) -> np.ndarray:
     return back
 
 
-def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force, backface=True, widen=0.25):
+def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force, backface=True, widen=0.25,
+             curve_cos=F(-2)):
     """One PATCH SUBDIVISION step; ``cam``: one or more camera records (``camera_rows``);
     ``backface``: cull the back-facing patches of one-sided instances, whose cones hold over the
     patch widened by ``widen`` per side. Returns (children, render patches, stats)."""
     n = len(patches)
     r = patches["range"].astype(np.float32)
     inst = patches["inst"]
-    m = _measure(patches, scene_inst, functions, cam)
+    m = _measure(patches, scene_inst, functions, cam, curve_cos)
 
     seen = m["code"] == 0
     back = backfacing(patches, scene_inst, functions, camera_rows(cam), seen, widen) if backface else np.zeros(n, bool)
@@ -280,7 +299,8 @@ def run_lod(scene, camera_records, settings, functions=None):
             continue
         patches, rp, st = lod_step(patches, inst, functions, camera_rows(camera_records),
                                    settings.threshold[0], settings.threshold[1], step,
-                                   step == settings.max_steps, settings.backface_cull, settings.backface_widen)
+                                   step == settings.max_steps, settings.backface_cull, settings.backface_widen,
+                                   settings.curve_cos())
         out.append(rp)
         steps.append(st)
         made += len(patches)

@@ -39,6 +39,14 @@ class LodSettings:
     # the widest sampling range a renderer draws of a patch, per side as a share of its size (the
     # cone and sphere hold over it): 0.25 covers every PointSettings.widen and TessSettings.overlap
     backface_widen: float = 0.25
+    # a patch also splits across a measured line whose consecutive segments turn by more than this
+    # (degrees; kernels/lod/lod.cl line_turns): detail between the samples, as a thin lobe, gets
+    # the patches it needs at any screen size. 180: off
+    detail_angle: float = 90.0
+
+    def curve_cos(self) -> np.float32:
+        """The kernel's ``curve_cos``: the cosine of ``detail_angle`` (-1 at 180: never below it)."""
+        return np.float32(np.cos(np.radians(self.detail_angle)))
 
     def validate(self):
         tu, tv = self.threshold
@@ -53,6 +61,9 @@ class LodSettings:
             raise SceneError(f"lod backface_cull must be true or false, got {self.backface_cull!r}")
         if not (isinstance(self.backface_widen, (int, float, np.floating)) and 0 <= self.backface_widen <= 1):
             raise SceneError(f"lod backface_widen must be a share of a patch in [0, 1], got {self.backface_widen!r}")
+        if isinstance(self.detail_angle, bool) or not isinstance(self.detail_angle, (int, float, np.floating)) \
+                or not 0 < self.detail_angle <= 180:
+            raise SceneError(f"lod detail_angle must be in (0, 180] degrees (180: off), got {self.detail_angle!r}")
         for name in ("max_patches", "patch_budget"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 1 << 31:
@@ -189,7 +200,9 @@ class LodStage:
         cap = min(b.capacity for b in self.bufs)
         # the buffers themselves, not their ids: held here, they cannot be freed and their ids reused
         backface, widen = np.uint32(bool(settings.backface_cull)), np.float32(settings.backface_widen)
+        curve_cos = settings.curve_cos()
         bound = (*inst, cam_buf, int(n_views), float(tu), float(tv), max_steps, cap, int(backface), float(widen),
+                 float(curve_cos),
                  *(b.buf for b in (self.init, *self.bufs, self.render, self.render_views)))
         layout, kernels = self._kernels(n_views)
         if bound != self._bound.get(layout):
@@ -198,7 +211,7 @@ class LodStage:
                 k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf, self.render_views.buf,
                            np.uint32(self.render.capacity), self.counters, *inst, cam_buf,
                            np.uint32(n_views), tu, tv,
-                           np.uint32(step), np.uint32(step == max_steps), backface, widen)
+                           np.uint32(step), np.uint32(step == max_steps), backface, widen, curve_cos)
             self._bound[layout] = bound
         if self._start_n != n_init:
             start = np.zeros((16, LOD_COUNTERS), np.uint32)

@@ -96,6 +96,9 @@ def add_arguments(p):
     p.add_argument("--culling", choices=["on", "off", "both"], default="on",
                    help="the points variants' occlusion and back-face culling (both: every points row also "
                         "without it, labelled 'no culling', for before/after ratios in one run; default on)")
+    p.add_argument("--detail-angle", type=positive_float, default=LodSettings.detail_angle,
+                   help="the LOD stage's detail_angle in degrees for the scenarios (180: off; default "
+                        f"{LodSettings.detail_angle:g}, docs/lod.md)")
     p.add_argument("--cse-before", action="store_true",
                    help="functions: also measure the generated code without the shared CSE (before/after)")
     p.add_argument("--out", default="out/bench", help="folder for results (default out/bench)")
@@ -180,6 +183,7 @@ def _device_buffers_mib(scene, size, ss: int = 1) -> float:
 def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling: bool = True):
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
+    rs.lod.detail_angle = args.detail_angle
     if not culling:   # on: the defaults (occlusion "auto", back faces of one-sided materials)
         rs.points.occlusion = rs.lod.backface_cull = False
     rs.tess.l_max = l_max
@@ -297,7 +301,8 @@ def run_bench(args) -> int:
         return 0
     dev = cl_device()
     result = {"device": dev.name, "device_type": "GPU" if dev.is_gpu else "CPU", "host": platform.node(),
-              "size": list(size), "frames": args.frames, "warmup": args.warmup, "scenarios": {}}
+              "size": list(size), "frames": args.frames, "warmup": args.warmup, "detail_angle": args.detail_angle,
+              "scenarios": {}}
 
     def save():
         write_atomically(out / "results.json", lambda tmp: Path(tmp).write_text(json.dumps(result, indent=1)))
