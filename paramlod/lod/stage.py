@@ -42,7 +42,7 @@ class LodSettings:
     # a patch also splits across a measured line whose consecutive segments turn by more than this
     # (degrees; kernels/lod/lod.cl line_turns): detail between the samples, as a thin lobe, gets
     # the patches it needs at any screen size. 180: off
-    detail_angle: float = 90.0
+    detail_angle: float = 120.0
 
     def curve_cos(self) -> np.float32:
         """The kernel's ``curve_cos``: the cosine of ``detail_angle`` (-1 at 180: never below it)."""
