@@ -106,9 +106,15 @@ inline void grow_box(float4* box, Sample s) {
 // resolve the surface along it (a thin SH lobe, a shell's nodule: the segments cut across it, and
 // the measure and the tessellation level taken from them fall short: lobes drawn short, holes in
 // the point grid). Such a line splits the patch across it as a long line does, while it is longer
-// than CURVE_MIN_PX on screen (about a pixel a segment). A sphere's or torus' whole circle turns
-// 51.4 degrees a segment and never splits for it.
-#define CURVE_MIN_PX 7.0f
+// than CURVE_MIN_PX on screen (two pixels a segment) and the patch's longest line in its
+// direction is shorter than CURVE_MAX_PX: past that the renderers take 4 or more samples or
+// tessellation segments per measured segment (tess level = the line's length in pixels at the
+// thesis's settings, points 1.5 a pixel), fine enough to follow what the 8 samples miss (at 1080p
+// an order-12 HARDI field seen close up split 10x with the bounds at 7 px and none). A sphere's or
+// torus' whole circle turns 51.4 degrees a segment and never splits for it; at 120 degrees the
+// yarn curtain's loops do not split either, at 90 they split 3x at 1080p.
+#define CURVE_MIN_PX 14.0f
+#define CURVE_MAX_PX 28.0f
 inline bool line_turns(__local const float4* w, uint first, float curve_cos) {
     bool turns = false;
     float3 a = w[first + 1u].xyz - w[first].xyz;
@@ -355,8 +361,9 @@ inline float box_float(int k) {
 // length, 8, 9 the longest u- and v-segment, 10, 11 w_u, w_v (float bits: maxima of floats >= 0 are
 // maxima of their bits, and one view's own value), 12 the mixed lines (bit k: line k), 13..16 the
 // screen box (box_key: min x, min y, max x, max y), 17, 18 the views that see the patch (bit v of
-// their 64: view v), 19 set when some view that sees the patch may see its front (back-face test).
-#define COMB 20
+// their 64: view v), 19 set when some view that sees the patch may see its front (back-face test),
+// 20 the lines that turn (line_turns; bit k: line k).
+#define COMB 21
 
 // One LOD step: a work-group of LOD_GROUP work-items measures one patch at a time (a patch's
 // samples are the expensive part, and a step with a few hundred patches would leave most of a GPU
@@ -488,7 +495,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                     // ... while its good part is longer than a pixel: past that, the undefined rest of the
                     // line beside it is sub-pixel too (a finite edge, as a dome's rim, stops splitting there)
                     if (n_bad > 0u && n_bad < 8u && sum > MIXED_MIN_PX) atomic_or(&comb[12], 1u << k);
-                    if (sum > CURVE_MIN_PX && line_turns(wpos, k * 8u, curve_cos)) atomic_or(&comb[12], 1u << k);
+                    if (sum > CURVE_MIN_PX && line_turns(wpos, k * 8u, curve_cos)) atomic_or(&comb[20], 1u << k);
                     // the line's speed at its two ends (on the patch's edges across it), from its first and
                     // last two segments: 7 segments span the line, so 7 x a segment is a whole-line measure
                     float need = 7.0f * fmax(edge_extrapolate(seg[0], seg[1]), edge_extrapolate(seg[6], seg[5]));
@@ -537,7 +544,10 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
             float eu[4], ev[4];
             bool mixed[8];
             for (uint k = 0; k < 4u; ++k) { eu[k] = as_float(comb[k]); ev[k] = as_float(comb[4u + k]); }
-            for (uint k = 0; k < 8u; ++k) mixed[k] = (comb[12] >> k) & 1u;
+            float most_u = fmax(fmax(eu[0], eu[1]), fmax(eu[2], eu[3]));
+            float most_v = fmax(fmax(ev[0], ev[1]), fmax(ev[2], ev[3]));
+            for (uint k = 0; k < 8u; ++k)
+                mixed[k] = ((comb[12] >> k) & 1u) || (((comb[20] >> k) & 1u) && (k < 4u ? most_u : most_v) < CURVE_MAX_PX);
             float4 box = (float4)(box_float((int)comb[13]), box_float((int)comb[14]),
                                   box_float((int)comb[15]), box_float((int)comb[16]));
             lod_decide(patch, eu, ev, mixed, as_float(comb[8]), as_float(comb[9]),

@@ -78,7 +78,8 @@ def _seg(s, state):
 
 BOUNDARY_CAP = F(2.0)   # kernels/lod/lod.cl BOUNDARY_CAP
 MIXED_MIN_PX = F(1.0)   # kernels/lod/lod.cl MIXED_MIN_PX
-CURVE_MIN_PX = F(7.0)   # kernels/lod/lod.cl CURVE_MIN_PX
+CURVE_MIN_PX = F(14.0)  # kernels/lod/lod.cl CURVE_MIN_PX
+CURVE_MAX_PX = F(28.0)  # kernels/lod/lod.cl CURVE_MAX_PX
 BOUNDARY_SHARE = F(0.9428090)   # kernels/lod/lod.cl BOUNDARY_SHARE: sqrt(2) / 1.5
 
 
@@ -157,10 +158,10 @@ def _view_measures(rows, cols, grid, turns=None):
     bad_r, bad_c = (st_r == 2).sum(axis=2), (st_c == 2).sum(axis=2)    # (n, 4) per line
     mixed = np.concatenate([(bad_r > 0) & (bad_r < 8) & (eu > MIXED_MIN_PX),   # ... while the good part
                             (bad_c > 0) & (bad_c < 8) & (ev > MIXED_MIN_PX)], axis=1)   # is over a pixel
-    if turns is not None:   # lines whose samples do not resolve the surface (lod.cl line_turns)
-        mixed |= turns & (np.concatenate([eu, ev], axis=1) > CURVE_MIN_PX)
+    # lines whose samples do not resolve the surface (lod.cl line_turns), long enough on screen
+    curvy = np.zeros_like(mixed) if turns is None else turns & (np.concatenate([eu, ev], axis=1) > CURVE_MIN_PX)
     return {"code": code, "eu": eu, "ev": ev, "msu": seg_u.max(axis=(1, 2)), "msv": seg_v.max(axis=(1, 2)),
-            "w_u": w_u, "w_v": w_v, "mixed": mixed, "box": box}
+            "w_u": w_u, "w_v": w_v, "mixed": mixed, "curvy": curvy, "box": box}
 
 
 def _most(x, seen):
@@ -238,6 +239,11 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force, backfac
     msu, msv = _most(m["msu"], seen), _most(m["msv"], seen)
     w_u, w_v = _most(m["w_u"], seen), _most(m["w_v"], seen)
     mixed = (m["mixed"] & seen[:, :, None]).any(axis=0)
+    # turning lines split while the patch's longest line that way is short (lod.cl CURVE_MAX_PX)
+    curvy = (m["curvy"] & seen[:, :, None]).any(axis=0)
+    short = np.concatenate([np.repeat((eu.max(axis=1) < CURVE_MAX_PX)[:, None], 4, axis=1),
+                            np.repeat((ev.max(axis=1) < CURVE_MAX_PX)[:, None], 4, axis=1)], axis=1)
+    mixed |= curvy & short
     mu_, mv_ = mixed[:, :4], mixed[:, 4:]
     big = np.float32(np.inf)
     lo = np.where(seen[:, :, None], m["box"][:, :, :2], big).min(axis=0)
