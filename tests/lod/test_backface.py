@@ -7,7 +7,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import paramlod as pl
-from paramlod.core.layouts import camera_record
 from paramlod.core.views import Views, stereo
 from paramlod.function.registry import builtin_functions
 from paramlod.lod.patches import EVAL_DTYPE, sort_key

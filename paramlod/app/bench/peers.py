@@ -578,11 +578,18 @@ def run_peers(args, out_dir, log=print) -> dict:
                     result["render"].append(r)
                     log(f"paramlod {r['variant']} {spec['name']}: {r['ms']:.1f} ms, error {r['error']:.3f}")
                     save()
-    for tool in renderers:
-        got = run_worker(tool, {"scenes": specs, "frames": frames, "warmup": warmup})
+    def worker_rows(tool, job):
+        """The worker's rows and arrays, or None once its failure is recorded and logged."""
+        got = run_worker(tool, job)
         if isinstance(got, dict):
             result["failed"].append(got)
             log(f"{tool}: {got['status']}")
+            return None
+        return got
+
+    for tool in renderers:
+        got = worker_rows(tool, {"scenes": specs, "frames": frames, "warmup": warmup})
+        if got is None:
             continue
         rows, arrays = got
         for r in rows:
@@ -605,10 +612,8 @@ def run_peers(args, out_dir, log=print) -> dict:
                 log(f"paramlod surfels {n}: {sec:.2f} s")
                 save()
         for tool in samplers:
-            got = run_worker(tool, {"mesh": path, "counts": counts})
-            if isinstance(got, dict):
-                result["failed"].append(got)
-                log(f"{tool}: {got['status']}")
+            got = worker_rows(tool, {"mesh": path, "counts": counts})
+            if got is None:
                 continue
             rows, arrays = got
             for r in rows:
