@@ -10,6 +10,8 @@ is smooth (``smooth_function``: the normal cone's bound assumes partials that do
 materials are two-sided by default, so by default nothing is ever culled as back-facing."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pyopencl as cl
 import sympy as sp
@@ -47,8 +49,15 @@ def instance_flags(scene, inst_u) -> np.ndarray:
     one_sided = [o.object_id for o in scene.objects if not o.material.two_sided]
     out = np.array(inst_u, np.uint32, copy=True)
     if one_sided and len(out):
-        smooth = np.array([smooth_function(f) for f in scene.functions()], bool)
+        functions = scene.functions()
+        smooth = np.array([smooth_function(f) for f in functions], bool)
         sel = np.isin(out[:, INSTANCE_U.offset("object")], np.asarray(one_sided, np.uint32))
+        rough = np.unique(out[sel & ~smooth[out[:, INSTANCE_U.offset("func")]], INSTANCE_U.offset("func")])
+        if len(rough):   # the user asked for culling that cannot be done safely: say so once per upload
+            names = ", ".join(sorted(functions[i].name for i in rough))
+            warnings.warn(f"two_sided = false has no effect on {names}: back faces are culled only for "
+                          "functions without Piecewise, Abs, floor, frac, Min, Max and the like, written in "
+                          "sympy (docs/lod.md, 'Back-face culling')", stacklevel=2)
         sel &= smooth[out[:, INSTANCE_U.offset("func")]]
         out[sel, INSTANCE_U.offset("flags")] |= ONE_SIDED
     return out

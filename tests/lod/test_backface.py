@@ -83,7 +83,8 @@ def test_non_smooth_functions_are_never_flagged():
     assert not smooth_function(builtin_functions()["palm_trunk"])
     assert not smooth_function(builtin_functions()["johis_heart"])
     scene = scene_of("palm_trunk", pl.translate(0, -2, 0))
-    _, steps = cl_lod(scene, [look((0.5, 0.0, 6.0))], pl.LodSettings(threshold=(16.0, 16.0)))
+    with pytest.warns(UserWarning, match="two_sided = false has no effect on palm_trunk"):
+        _, steps = cl_lod(scene, [look((0.5, 0.0, 6.0))], pl.LodSettings(threshold=(16.0, 16.0)))
     assert sum(s["backface"] for s in steps) == 0
 
 
