@@ -161,9 +161,10 @@ def _print_checked(printer: CLPrinter, expr, fn: ParametricFunction) -> str:
 
 
 def param_lines(fn: ParametricFunction, printer: CLPrinter = _printer) -> list[str]:
-    """Lines that load the parameter block into the sympy parameter symbols."""
+    """Lines that load the device parameter block into the sympy parameter symbols and the
+    hoisted values (ParametricFunction.hoisted, after the parameters)."""
     return [f"    {printer.local_decl} {printer.doprint(s)} = {printer.param_read.format(i)};"
-            for i, s in enumerate(fn.param_symbols)]
+            for i, s in enumerate((*fn.param_symbols, *(h for h, _ in fn.hoisted)))]
 
 
 # --- lowering: one shared program per call --------------------------------------------------------
@@ -395,7 +396,7 @@ def cl_function_source(fn: ParametricFunction, index: int, optimize: bool = True
 
 def lowered(fn: ParametricFunction, which: str, optimize: bool = True) -> Lowered:
     """The steps of ``pl_pos_i`` (``which="position"``) or ``pl_surf_i`` ("surface") as generated."""
-    bindings, outputs = fn.program(which)
+    bindings, outputs = fn.device_program(which) if optimize else fn.program(which)
     return lower(outputs, bindings, optimize=optimize, sincos=optimize)
 
 
@@ -404,11 +405,12 @@ def _cl_function_source(fn: ParametricFunction, index: int, optimize: bool = Tru
     if fn.is_snippet:
         return head + _snippet_source(fn, index)
     loads = param_lines(fn)
-    bindings, outputs = fn.program("position")
+    program = fn.device_program if optimize else fn.program   # unoptimised: parameter terms per sample too
+    bindings, outputs = program("position")
     lines, (x, y, z) = function_body(fn, outputs, bindings=bindings, optimize=optimize, sincos=optimize)
     pos = (f"inline float3 pl_pos_{index}(float u, float v, __global const float* P) {{\n"
            + "\n".join(loads + lines) + f"\n    return (float3)({x}, {y}, {z});\n}}\n")
-    bindings, outputs = fn.program("surface")
+    bindings, outputs = program("surface")
     lines, r = function_body(fn, outputs, bindings=bindings, optimize=optimize, sincos=optimize)
     surf = (f"inline void pl_surf_{index}(float u, float v, __global const float* P,"
             f" float3* pos, float3* du, float3* dv) {{\n" + "\n".join(loads + lines)

@@ -106,7 +106,7 @@ def _snippet_source(fn: ParametricFunction, index: int, position: bool, surface:
 def _program_of(fn: ParametricFunction, which: str):
     """(bindings, outputs) of ``fn`` for "position" (3 outputs) or "surface" (9: f, df/du, df/dv),
     the same program the OpenCL code is generated from."""
-    return fn.program(which)
+    return fn.device_program(which)
 
 
 def glsl_function_source(fn: ParametricFunction, index: int, position: bool = True, surface: bool = True) -> str:

@@ -263,6 +263,67 @@ class ParametricFunction:
             return self.bindings + dbind, (*self.exprs, *du, *dv)
         raise ValueError(f"program(): which must be 'position' or 'surface', got {which!r}")
 
+    # --- parameter-only subexpressions, hoisted out of the per-sample device code ---------------
+    @cached_property
+    def hoisted(self) -> tuple:
+        """((symbol, expr), ...): the subexpressions of the parameters alone that cost a function
+        call, a division or a fractional power (a seashell's tan(alpha) and (a/b)**c). The device
+        code reads them from the parameter block, after the parameters, computed once per instance
+        on the host (``device_blocks``), instead of evaluating them for every sample
+        (``device_program``). Empty for snippets."""
+        if self.exprs is None:
+            return ()
+        params = set(self.param_symbols)
+        found = {}
+
+        def visit(e):
+            if e.is_Atom or not isinstance(e, sp.Basic):
+                return
+            if (isinstance(e, sp.Expr) and e.free_symbols and e.free_symbols <= params
+                    and any(isinstance(n, sp.Function) or (n.is_Pow and not (n.exp.is_Integer and n.exp > 0))
+                            for n in sp.preorder_traversal(e))):
+                found.setdefault(e, None)
+                return
+            for a in e.args:
+                visit(a)
+
+        for which in ("position", "surface"):
+            bindings, outputs = self.program(which)
+            for e in (*(b for _, b in bindings), *outputs):
+                visit(e)
+        return tuple((sp.Symbol(f"hp{i}", real=True), e) for i, e in enumerate(found))
+
+    @property
+    def block_size(self) -> int:
+        """Floats of a device parameter block: the parameters, then the hoisted values."""
+        return self.param_count + len(self.hoisted)
+
+    def device_program(self, which: str = "position"):
+        """``program(which)`` with the hoisted subexpressions replaced by their symbols: what the
+        OpenCL and GLSL code evaluate per sample."""
+        bindings, outputs = self.program(which)
+        if not self.hoisted:
+            return bindings, outputs
+        sub = {e: sym for sym, e in self.hoisted}
+        return (tuple((sym, e.xreplace(sub)) for sym, e in bindings), tuple(e.xreplace(sub) for e in outputs))
+
+    @cached_property
+    def _np_hoisted(self):
+        return sp.lambdify(self.param_symbols, [e for _, e in self.hoisted], "numpy")
+
+    def device_blocks(self, blocks) -> np.ndarray:
+        """float32 device parameter blocks (``block_size`` floats) of parameter blocks (one, or
+        [n, param_count]): the hoisted values appended, computed in float64."""
+        blocks = np.asarray(blocks, np.float32)
+        if not self.hoisted:
+            return blocks
+        rows = blocks.reshape(-1, self.param_count)
+        with np.errstate(all="ignore"):
+            vals = self._np_hoisted(*rows.astype(np.float64).T)
+        extra = np.stack([np.broadcast_to(np.asarray(x, np.float64), (len(rows),)) for x in vals], axis=1)
+        out = np.concatenate([rows, extra.astype(np.float32)], axis=1)
+        return out if blocks.ndim == 2 else out.reshape(-1)
+
     # --- numpy evaluation --------------------------------------------------------------------
     def _lambdify(self, which: str):
         bindings, outputs = self.program(which)

@@ -190,7 +190,7 @@ def evaluate_cl(fn: ParametricFunction, u, v, block=None, functions=None, **para
     q = cl_device().queue
     k = kernel("eval_samples", ["common/eval.cl"], funcs)   # built once per set of functions, then cached
     d_uv = cla.to_device(q, np.ascontiguousarray(uv, np.float32))
-    d_p = cla.to_device(q, np.concatenate([np.asarray(block, np.float32), np.zeros(1, np.float32)]))
+    d_p = cla.to_device(q, np.concatenate([fn.device_blocks(np.asarray(block, np.float32).reshape(-1)), np.zeros(1, np.float32)]))
     d_out = cla.empty(q, max(1, n) * 12, np.float32)
     k(q, (max(1, n),), None, np.uint32(index), d_uv.data, np.uint32(n), d_p.data, d_out.data)
     out = d_out.get()[:n * 12].reshape(shape + (4, 3)).astype(np.float64)
@@ -209,7 +209,7 @@ def measure_throughput(fn: ParametricFunction, side: int = 512, repeats: int = 3
     throughput = build(["common/eval.cl"], [fn]).eval_throughput
     if block is None:
         block = fn.param_block()
-    d_p = cla.to_device(q, np.concatenate([np.asarray(block, np.float32), np.zeros(1, np.float32)]))
+    d_p = cla.to_device(q, np.concatenate([fn.device_blocks(np.asarray(block, np.float32).reshape(-1)), np.zeros(1, np.float32)]))
     out = cla.empty(q, side * side, np.float32)
     (u0, u1), (v0, v1) = fn.u_range, fn.v_range
     args = (np.uint32(0), np.float32(u0), np.float32((u1 - u0) / (side - 1)), np.float32(v0),

@@ -69,7 +69,7 @@ def glsl_surface(fn, u, v, block=None, **params):
     uv = np.stack([np.broadcast_to(u, shape).reshape(-1), np.broadcast_to(v, shape).reshape(-1)], axis=1)
     if block is None:
         block = fn.param_block(params)
-    block = np.concatenate([np.asarray(block, np.float32).reshape(-1), np.zeros(1, np.float32)])
+    block = np.concatenate([fn.device_blocks(np.asarray(block, np.float32).reshape(-1)), np.zeros(1, np.float32)])
     ctx = gl_context()
     prog = _probe_program(ctx, fn)
     n = len(uv)

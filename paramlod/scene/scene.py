@@ -473,6 +473,7 @@ class Scene:
         inst_f, inst_u, params, mats = [], [], [], []
         offset = 0
         for fn, models, blocks, oid, mat in groups:
+            blocks = fn.device_blocks(blocks)   # the hoisted parameter terms appended
             n = len(models)
             f = np.zeros((n, INST_FLOATS), np.float32)
             f[:, 0:16] = models.reshape(n, 16)

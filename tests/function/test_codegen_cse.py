@@ -141,3 +141,28 @@ def test_fma_ceiling_kernel_matches_its_twin():
     out = cla.empty(q, n, np.float32)
     _fma_kernel()(q, (n,), None, np.uint32(steps), np.float32(0.999), np.float32(1e-3), out.data).wait()
     np.testing.assert_allclose(out.get(), fma_ceiling_reference(n, steps, 0.999, 1e-3), rtol=1e-5)
+
+
+def test_parameter_terms_are_computed_once_per_instance_not_per_sample():
+    """A seashell's tan(alpha), sin(mu), ... depend on its parameters alone: the generated code
+    reads them from the device parameter block (ParametricFunction.hoisted), and the values,
+    computed on the host for any parameters, give what the numpy twin gives."""
+    from paramlod.function.codegen_glsl import glsl_function_source
+
+    fn = builtin_functions()["seashell1"]
+    assert fn.hoisted and fn.block_size == fn.param_count + len(fn.hoisted)
+    for src in (cl_function_source(fn, 0), glsl_function_source(fn, 0)):
+        body = src.split("pl_surf_0")[1]
+        assert "tan(" not in body and "hp0" in body
+    block = fn.param_block({"alpha": 84.0, "mu": 20.0, "nod_height": 2.0})
+    assert fn.device_blocks(block).size == fn.block_size
+    assert fn.device_blocks(np.stack([block, block])).shape == (2, fn.block_size)
+    u, v = _uv(fn)
+    pos, du, dv, pos_only = evaluate_cl(fn, u, v, block=block)
+    ref, ru, rv = fn.surface(u.astype(np.float64), v.astype(np.float64), block)
+    scale = np.abs(ref).max()
+    for got, want in ((pos, ref), (pos_only, ref)):
+        np.testing.assert_allclose(got, want, atol=2e-4 * scale)
+    np.testing.assert_allclose(du, ru, atol=2e-4 * np.abs(ru).max())
+    # functions of per-sample variables alone, or of nothing costly, hoist nothing
+    assert builtin_functions()["sphere"].hoisted == () and make_sh_glyph(8).hoisted == ()

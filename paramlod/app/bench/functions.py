@@ -220,7 +220,7 @@ def function_throughput(nu=2048, nv=1024, before: bool = False, names=None, repe
     for name, fn in builtin_set(orders).items():
         if names is not None and name not in names:
             continue
-        params = cla.to_device(q, np.concatenate([fn.param_block(), np.zeros(1, np.float32)]))
+        params = cla.to_device(q, np.concatenate([fn.device_blocks(fn.param_block()), np.zeros(1, np.float32)]))
         row = {"function": name, "peak_flops": peak, "peak_info_flops": peak_info}
         for opt, tag in ((True, ""), (False, "_before")) if before else ((True, ""),):
             src = cl_dispatch_source([fn], optimize=opt)
