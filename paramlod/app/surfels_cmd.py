@@ -169,7 +169,7 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
                                                          "with {stem} or {name}, e.g. out/{stem}.surfels")
     s.add_argument("--views", type=int, default=16, help="orthographic views on a Fibonacci sphere (1..32, default 16)")
     s.add_argument("--resolution", type=int, default=None,
-                   help="G-buffer resolution per view (default: from the count, 128 up to 10k surfels, 512 from 42k)")
+                   help="G-buffer resolution per view (default: from the count, 128 up to 11k surfels, 384 up to 102k, then 512)")
     s.add_argument("--seed", type=int, default=0, help="seed of the first sample (default 0)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     dist.add_job_options(s)

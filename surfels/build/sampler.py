@@ -34,7 +34,7 @@ from paramlod.device.programs import build
 from paramlod.errors import SurfelError
 from paramlod.scene.scene import Scene
 from paramlod.surfels.build.gbuffer import GBuffer, mesh_gbuffer, scene_gbuffer
-from paramlod.surfels.build.relax import ITERATIONS, relax
+from paramlod.surfels.build.relax import auto_iterations, relax
 from paramlod.surfels.build.schedule import (HI, THRESHOLD, auto_resolution, compact_sort, handover_r2, key_pixel,
                                              key_r2, level_strides, remap_keys, resume_radii, splat_r2, stop_r2,
                                              threshold_r2)
@@ -317,14 +317,16 @@ def run_levels(gbuf: GBuffer, n: int, seed: int = 0, threshold: float = THRESHOL
 
 
 def sample_gbuffer(gbuf: GBuffer, n: int, seed: int = 0, progress: bool = False,
-                   threshold: float = THRESHOLD, relax_iterations: int = ITERATIONS) -> SurfelSet:
+                   threshold: float = THRESHOLD, relax_iterations: int | None = None) -> SurfelSet:
     """Sample ``n`` blue surfels from G-buffers (fewer when the G-buffers hold fewer distinct
     points: then ``meta['requested']`` keeps n and a warning says so). The farthest-point rounds
     give the order; ``relax_iterations`` of relax.relax then even out the full set (0: the
-    surfels stay on their pixels)."""
+    surfels stay on their pixels; None: relax.auto_iterations for n and the resolution)."""
     n = _check_count(n)
     if not 0.0 < threshold <= 1.0:
         raise SurfelError(f"threshold must be in (0, 1], got {threshold}")
+    if relax_iterations is None:
+        relax_iterations = auto_iterations(n, gbuf.views.resolution)
     if isinstance(relax_iterations, bool) or not isinstance(relax_iterations, (int, np.integer)) \
             or relax_iterations < 0:
         raise SurfelError(f"relax_iterations must be an integer >= 0, got {relax_iterations!r}")

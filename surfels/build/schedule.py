@@ -51,12 +51,13 @@ def compact_sort(out: np.ndarray) -> np.ndarray:
 
 
 def auto_resolution(n: int) -> int:
-    """G-buffer resolution for n surfels when none is given: the smallest of 64, 128, 256, 512 with
-    at least 1.25 sqrt(n) pixels per side, else 512: 128 up to 10,485 surfels, 256 up to 41,943
-    (on the bunny about 1.5 pixels per final spacing at 10k and 100k; the relaxation moves
-    surfels off the pixel grid, and fewer pixels make the G-buffers and rounds cheaper)."""
-    for r in (64, 128, 256):
-        if r >= 1.25 * np.sqrt(n):
+    """G-buffer resolution for n surfels when none is given: the smallest of 64, 128, 256, 384, 512
+    with at least 1.2 sqrt(n) pixels per side, else 512: 128 up to 11,377 surfels, 256 up to
+    45,511, 384 up to 102,400 (on the bunny about 1.5 pixels per final spacing at 10k; the
+    relaxation moves surfels off the pixel grid, and fewer pixels make the G-buffers and rounds
+    cheaper; relax.auto_iterations gives coarse G-buffers more iterations)."""
+    for r in (64, 128, 256, 384):
+        if r >= 1.2 * np.sqrt(n):
             return r
     return 512
 

@@ -7,6 +7,7 @@ from scipy.spatial import cKDTree
 
 from paramlod.errors import SurfelError
 from paramlod.surfels.build import mesh_gbuffer, sample_gbuffer, sample_mesh, soup_from_trimesh
+from paramlod.surfels.build.relax import auto_iterations
 from paramlod.surfels.build.schedule import auto_resolution
 
 
@@ -81,6 +82,7 @@ def test_bad_relaxation_count_is_named(bad):
 
 
 def test_resolution_follows_the_count():
-    assert [auto_resolution(n) for n in (500, 10_000, 30_000, 100_000)] == [64, 128, 256, 512]
+    assert [auto_resolution(n) for n in (500, 10_000, 30_000, 100_000, 200_000)] == [64, 128, 256, 384, 512]
+    assert [auto_iterations(n, auto_resolution(n)) for n in (10_000, 100_000, 200_000)] == [16, 24, 24]
     s = sample_mesh(trimesh.creation.icosphere(subdivisions=2), 500, views=4)
     assert s.meta["resolution"] == 64 and len(s) == 500

@@ -511,7 +511,8 @@ def sampling_row(tool: str, version: str, n: int, seconds: float, pts, area: flo
     return row
 
 
-def paramlod_sample(mesh_path: str, n: int, views: int = 16, resolution: int = 512) -> tuple[float, np.ndarray]:
+def paramlod_sample(mesh_path: str, n: int, views: int = 16, resolution: int | None = None) -> tuple[float, np.ndarray]:
+    """Seconds and positions of ``sample_mesh`` with its defaults (the resolution from the count)."""
     t0 = time.perf_counter()
     s = sample_mesh(mesh_path, n, views=views, resolution=resolution)
     return time.perf_counter() - t0, s.positions
