@@ -4,12 +4,15 @@ normalisations), the FLOP counter's rule, and the FP32 peak estimate."""
 import re
 
 import numpy as np
+import pyopencl.array as cla
 import pytest
 import sympy as sp
 
-from paramlod.app.bench.functions import (count_flops, fma_ceiling_reference, function_flops,
+from paramlod.app.bench.functions import (_fma_kernel, count_flops, fma_ceiling_reference, function_flops,
                                           peak_from_info)
+from paramlod.device.context import cl_device
 from paramlod.function.codegen_cl import SinCos, cl_function_source, function_body, lower
+from paramlod.function.codegen_glsl import glsl_function_source
 from paramlod.function.plugins import evaluate_cl
 from paramlod.function.registry import builtin_functions
 from paramlod.functions.sh_glyph import make_sh_glyph
@@ -131,11 +134,6 @@ def test_peak_estimate_from_a_device_description():
 
 
 def test_fma_ceiling_kernel_matches_its_twin():
-    import pyopencl.array as cla
-
-    from paramlod.app.bench.functions import _fma_kernel
-    from paramlod.device.context import cl_device
-
     q = cl_device().queue
     n, steps = 1000, 37
     out = cla.empty(q, n, np.float32)
@@ -147,8 +145,6 @@ def test_parameter_terms_are_computed_once_per_instance_not_per_sample():
     """A seashell's tan(alpha), sin(mu), ... depend on its parameters alone: the generated code
     reads them from the device parameter block (ParametricFunction.hoisted), and the values,
     computed on the host for any parameters, give what the numpy twin gives."""
-    from paramlod.function.codegen_glsl import glsl_function_source
-
     fn = builtin_functions()["seashell1"]
     assert fn.hoisted and fn.block_size == fn.param_count + len(fn.hoisted)
     for src in (cl_function_source(fn, 0), glsl_function_source(fn, 0)):
