@@ -47,10 +47,7 @@ def test_line_turns_twin():
 def test_kernel_matches_twin_on_a_glyph_field(angle):
     _, _, scene, cam = _field(4, (160, 160))
     lod = _settings(angle).lod
-    stage = ParametricStage(scene)
-    dev = stage.upload(scene, cam)
-    _, n, steps, _ = stage.lod.run(dev["inst"], dev["domains"], dev["cam"], lod)
-    got = stage.lod.read_render_list(n)
+    got, steps = ParametricStage(scene).render_list(scene, cam, lod)
     ref, ref_steps = run_lod(scene, camera_record(cam), lod)
     assert steps == ref_steps
     assert len(got) > 2 * 16   # the 16 glyphs split for their lobes (one patch each without)
