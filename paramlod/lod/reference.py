@@ -28,7 +28,7 @@ def camera_rows(cam) -> np.ndarray:
     return np.asarray(cam, np.float32).reshape(-1, CAMERA.length)
 
 
-def _world(scene_inst, functions, inst, u, v):
+def world_positions(scene_inst, functions, inst, u, v):
     """World positions (after the instance transform) and the bad mask, per sample."""
     inst_f, inst_u, params = scene_inst
     shape = u.shape
@@ -135,8 +135,9 @@ def line_turns(w, bad, curve_cos) -> np.ndarray:
 
 def _view_measures(rows, cols, grid, turns=None):
     """One view's measures of n patches from its projected samples ((s, state, code) of the
-    u-lines, the v-lines (n, 4, 8) and the 5x5 grid (n, 5, 5); turns: (n, 8) line_turns of the lines): code (n,), eu, ev (n, 4), msu,
-    msv, w_u, w_v (n,), mixed (n, 8: u-lines then v-lines), box (n, 4)."""
+    u-lines, the v-lines (n, 4, 8) and the 5x5 grid (n, 5, 5); turns: (n, 8), line_turns of the
+    lines): code (n,), eu, ev (n, 4), msu, msv, w_u, w_v (n,), mixed, curvy (n, 8: u-lines then
+    v-lines; curvy: turning lines over CURVE_MIN_PX), box (n, 4)."""
     (s_r, st_r, c_r), (s_c, st_c, c_c), (s_g, st_g, c_g) = rows, cols, grid
     n = len(s_r)
     code = (np.bitwise_and.reduce(c_r.reshape(n, 32), axis=1) & np.bitwise_and.reduce(c_c.reshape(n, 32), axis=1)
@@ -192,8 +193,8 @@ def _measure(patches, scene_inst, functions, cam, curve_cos=F(-2)) -> dict:
     gv = v0[:, :, None] + dv[:, :, None] * g[None, :, None]          # (n, 5, 1) over j
     gu, gv = np.broadcast_to(gu, (n, 5, 5)), np.broadcast_to(gv, (n, 5, 5))
     ii = np.broadcast_to(inst[:, None, None], (n, 4, 8))
-    world = (_world(scene_inst, functions, ii, ru, rv), _world(scene_inst, functions, ii, cu, cv),
-             _world(scene_inst, functions, np.broadcast_to(inst[:, None, None], (n, 5, 5)), gu, gv))
+    world = (world_positions(scene_inst, functions, ii, ru, rv), world_positions(scene_inst, functions, ii, cu, cv),
+             world_positions(scene_inst, functions, np.broadcast_to(inst[:, None, None], (n, 5, 5)), gu, gv))
     turns = np.concatenate([line_turns(*world[0], curve_cos), line_turns(*world[1], curve_cos)], axis=1)   # (n, 8)
     per_view = [_view_measures(*(_project(w, bad, c) for w, bad in world), turns) for c in camera_rows(cam)]
     return {k: np.stack([pv[k] for pv in per_view]) for k in per_view[0]}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod.core.layouts import CAMERA
-from paramlod.lod.reference import _world
+from paramlod.lod.reference import world_positions
 from paramlod.renderers.occlusion import GRID, pyramid_levels
 
 F32 = np.float32
@@ -62,7 +62,7 @@ def patch_bounds(render_list: np.ndarray, scene_inst, functions, cam, widen: flo
     u = u0[:, None, None] + (u1 - u0)[:, None, None] * t[None, None, :]
     v = v0[:, None, None] + (v1 - v0)[:, None, None] * t[None, :, None]
     u, v = np.broadcast_to(u, (n, GRID, GRID)), np.broadcast_to(v, (n, GRID, GRID))
-    world, bad = _world(scene_inst, functions, np.broadcast_to(inst[:, None, None], u.shape), u, v)
+    world, bad = world_positions(scene_inst, functions, np.broadcast_to(inst[:, None, None], u.shape), u, v)
     view = cam[0:16].reshape(4, 4)
     e = world @ view[:3, :3].T + view[:3, 3]
     edge = np.maximum(np.linalg.norm(np.diff(e, axis=2), axis=-1).max(axis=(1, 2)),

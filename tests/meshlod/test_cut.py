@@ -433,7 +433,7 @@ def test_overflow_reports_the_true_count_and_growing_redoes_the_cut(cut):
 
 
 # --- culling against float64 brute force --------------------------------------------------------
-def _world(model, pts):
+def world_positions(model, pts):
     return pts @ model[:3, :3].T + model[:3, 3]
 
 
@@ -462,7 +462,7 @@ def test_frustum_culling_drops_only_clusters_outside():
             model = instances.inst_f[i, :16].reshape(4, 4).astype(np.float64)
             cl = arrays.clusters[c]
             tri = arrays.triangles[cl["first"]:cl["first"] + cl["count"]]
-            clip = np.c_[_world(model, arrays.vertices[tri.ravel(), :3].astype(np.float64)), np.ones(tri.size)] @ pv.T
+            clip = np.c_[world_positions(model, arrays.vertices[tri.ravel(), :3].astype(np.float64)), np.ones(tri.size)] @ pv.T
             w = clip[:, 3]
             tol = 1e-6 * np.abs(clip).max()
             outside = [(clip[:, a] * s < -w + tol).all() for a in range(3) for s in (1, -1)]
@@ -491,7 +491,7 @@ def test_backface_culling_drops_only_clusters_facing_away():
             model = instances.inst_f[i, :16].reshape(4, 4).astype(np.float64)
             cl = arrays.clusters[c]
             tri = arrays.triangles[cl["first"]:cl["first"] + cl["count"]]
-            p = _world(model, arrays.vertices[tri.ravel(), :3].astype(np.float64)).reshape(-1, 3, 3)
+            p = world_positions(model, arrays.vertices[tri.ravel(), :3].astype(np.float64)).reshape(-1, 3, 3)
             n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * np.sign(np.linalg.det(model[:3, :3]))
             ray = np.broadcast_to(ahead, p[:, 0].shape) if isinstance(cam, OrthoCamera) else p[:, 0] - cam.eye
             cos = np.einsum("ij,ij->i", n, ray) / np.linalg.norm(n, axis=1) / np.linalg.norm(ray, axis=1)
@@ -607,7 +607,7 @@ def test_real_cones_cull_only_triangles_facing_away(real_dags):
             model = instances.inst_f[i, :16].reshape(4, 4).astype(np.float64)
             cl = arrays.clusters[c]
             tri = arrays.triangles[cl["first"]:cl["first"] + cl["count"]]
-            p = _world(model, arrays.vertices[tri.ravel(), :3].astype(np.float64)).reshape(-1, 3, 3)
+            p = world_positions(model, arrays.vertices[tri.ravel(), :3].astype(np.float64)).reshape(-1, 3, 3)
             n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * np.sign(np.linalg.det(model[:3, :3]))
             ray = np.broadcast_to(-cam.view[2, :3], p[:, 0].shape) if isinstance(cam, OrthoCamera) else p[:, 0] - cam.eye
             ok = np.linalg.norm(n, axis=1) > 0   # the scan has a few zero-area triangles

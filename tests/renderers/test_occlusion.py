@@ -11,7 +11,7 @@ import sympy as sp
 import paramlod as pl
 from paramlod.core.layouts import camera_record
 from paramlod.device.context import cl_device
-from paramlod.lod.reference import _world
+from paramlod.lod.reference import world_positions
 from paramlod.pipeline.driver import scene_state
 from paramlod.renderers.occlusion import DepthPyramid, pyramid_levels
 from paramlod.renderers.occlusion_reference import depth_pyramid, occluded, patch_bounds
@@ -142,7 +142,7 @@ def test_bounds_hold_every_sample(fname):
     t = np.linspace(0, 1, 17, dtype=np.float32)
     u = np.broadcast_to(u0[:, None, None] + (u1 - u0)[:, None, None] * t[None, None, :], (n, 17, 17))
     v = np.broadcast_to(v0[:, None, None] + (v1 - v0)[:, None, None] * t[None, :, None], (n, 17, 17))
-    world, bad = _world(scene.instance_buffers(), scene.functions(),
+    world, bad = world_positions(scene.instance_buffers(), scene.functions(),
                         np.broadcast_to(rl["inst"].astype(np.int64)[:, None, None], u.shape), u, v)
     rec = camera_record(cam).astype(np.float64)
     view, proj = rec[0:16].reshape(4, 4), rec[16:32].reshape(4, 4)
