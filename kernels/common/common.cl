@@ -43,3 +43,13 @@ inline float3 view_dir(__global const float* cam, float3 e) {
 inline bool is_bad3(float3 p) {
     return isnan(p.x) || isnan(p.y) || isnan(p.z) || isinf(p.x) || isinf(p.y) || isinf(p.z);
 }
+
+// The parameter range a renderer samples of a patch (u0, u1, v0, v1): widened by `widen` of its
+// size per side and clamped to the instance's domain. One definition for the point renderer
+// (points.cl point_grid) and for the bounds that must hold over what it samples (lod.cl
+// cone_uv, occlusion.cl patch_bound); twins: the same arithmetic in float32 numpy.
+inline float4 sampled_range(float4 range, __global const float* I, float widen) {
+    float wu = (range.y - range.x) * widen, wv = (range.w - range.z) * widen;
+    return (float4)(fmax(range.x - wu, I[INST_DOMAIN + 0]), fmin(range.y + wu, I[INST_DOMAIN + 1]),
+                    fmax(range.z - wv, I[INST_DOMAIN + 2]), fmin(range.w + wv, I[INST_DOMAIN + 3]));
+}

@@ -173,10 +173,8 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
 // Node k of the 5x5 grid over the patch widened by `widen` of its size per side and clamped to
 // the domain, as the point renderer's sampling range (kernels/points/points.cl point_grid).
 inline float2 cone_uv(uint k, float4 range, __global const float* I, float widen) {
-    float wu = (range.y - range.x) * widen, wv = (range.w - range.z) * widen;
-    float u0 = fmax(range.x - wu, I[INST_DOMAIN + 0]), u1 = fmin(range.y + wu, I[INST_DOMAIN + 1]);
-    float v0 = fmax(range.z - wv, I[INST_DOMAIN + 2]), v1 = fmin(range.w + wv, I[INST_DOMAIN + 3]);
-    return (float2)(u0 + (u1 - u0) * ((float)(k % 5u) * 0.25f), v0 + (v1 - v0) * ((float)(k / 5u) * 0.25f));
+    float4 r = sampled_range(range, I, widen);
+    return (float2)(r.x + (r.y - r.x) * ((float)(k % 5u) * 0.25f), r.z + (r.w - r.z) * ((float)(k / 5u) * 0.25f));
 }
 
 // The normal cone and bounding sphere of one patch from its 25 nodes (world positions; world

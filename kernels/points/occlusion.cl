@@ -58,9 +58,8 @@ inline void patch_bound(RenderPatch rp, uint func, __global const float* P, __gl
                         __global const float* cam, float widen, __global float* out)
 {
     __global const float* V = cam + CAM_VIEW;
-    float wu = (rp.range.y - rp.range.x) * widen, wv = (rp.range.w - rp.range.z) * widen;
-    float u0 = fmax(rp.range.x - wu, I[INST_DOMAIN + 0]), u1 = fmin(rp.range.y + wu, I[INST_DOMAIN + 1]);
-    float v0 = fmax(rp.range.z - wv, I[INST_DOMAIN + 2]), v1 = fmin(rp.range.w + wv, I[INST_DOMAIN + 3]);
+    float4 r = sampled_range(rp.range, I, widen);
+    float u0 = r.x, u1 = r.y, v0 = r.z, v1 = r.w;
     float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
     float3 row[OCC_GRID];
     float edge = 0.0f;

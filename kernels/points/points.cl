@@ -81,9 +81,8 @@ inline PointGrid point_grid(RenderPatch rp, __global const float* I, float facto
     GridAxis gu = grid_axis(rp.ext.z, m.x, measure == 2u, factor, max_side);
     GridAxis gv = grid_axis(rp.ext.w, m.y, measure == 2u, factor, max_side);
     g.nu = gu.n; g.nv = gv.n; g.nau = gu.na; g.nav = gv.na;
-    float wu = (rp.range.y - rp.range.x) * widen, wv = (rp.range.w - rp.range.z) * widen;
-    float u0 = fmax(rp.range.x - wu, I[INST_DOMAIN + 0]), u1 = fmin(rp.range.y + wu, I[INST_DOMAIN + 1]);
-    float v0 = fmax(rp.range.z - wv, I[INST_DOMAIN + 2]), v1 = fmin(rp.range.w + wv, I[INST_DOMAIN + 3]);
+    float4 r = sampled_range(rp.range, I, widen);
+    float u0 = r.x, u1 = r.y, v0 = r.z, v1 = r.w;
     g.u0 = u0; g.v0 = v0; g.u1 = u1; g.v1 = v1;
     if (gu.na) {
         float l = (u1 - u0) * (1.0f / 7.0f);

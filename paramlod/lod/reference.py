@@ -242,9 +242,8 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force, backfac
     mixed = (m["mixed"] & seen[:, :, None]).any(axis=0)
     # turning lines split while the patch's longest line that way is short (lod.cl CURVE_MAX_PX)
     curvy = (m["curvy"] & seen[:, :, None]).any(axis=0)
-    short = np.concatenate([np.repeat((eu.max(axis=1) < CURVE_MAX_PX)[:, None], 4, axis=1),
-                            np.repeat((ev.max(axis=1) < CURVE_MAX_PX)[:, None], 4, axis=1)], axis=1)
-    mixed |= curvy & short
+    short = np.stack([eu.max(axis=1), ev.max(axis=1)], axis=1) < CURVE_MAX_PX   # (n, 2): along u, along v
+    mixed |= curvy & np.repeat(short, 4, axis=1)
     mu_, mv_ = mixed[:, :4], mixed[:, 4:]
     big = np.float32(np.inf)
     lo = np.where(seen[:, :, None], m["box"][:, :, :2], big).min(axis=0)
@@ -321,19 +320,25 @@ CONE_EPS = F(1e-3)        # lod.cl CONE_EPS
 HALF_PI = F(np.pi / 2)
 
 
-def cone_nodes(patches, inst_f, widen):
-    """(u, v) float32 (n, 5, 5) [j over v, i over u] of the cone's nodes: the 5x5 grid over each
-    patch widened by ``widen`` of its size per side and clamped to its instance's domain."""
+def sampled_range(patches, inst_f, widen):
+    """Twin of sampled_range() in common.cl: (u0, u1, v0, v1) float32 (n,) each, every patch's range
+    widened by ``widen`` of its size per side and clamped to its instance's domain."""
     r = patches["range"].astype(np.float32)
-    dom = inst_f[patches["inst"], 28:32]
+    dom = inst_f[patches["inst"].astype(np.int64), 28:32]
     w = F(widen)
     wu, wv = (r[:, 1] - r[:, 0]) * w, (r[:, 3] - r[:, 2]) * w
-    u0, u1 = np.fmax(r[:, 0] - wu, dom[:, 0]), np.fmin(r[:, 1] + wu, dom[:, 1])
-    v0, v1 = np.fmax(r[:, 2] - wv, dom[:, 2]), np.fmin(r[:, 3] + wv, dom[:, 3])
+    return (np.fmax(r[:, 0] - wu, dom[:, 0]), np.fmin(r[:, 1] + wu, dom[:, 1]),
+            np.fmax(r[:, 2] - wv, dom[:, 2]), np.fmin(r[:, 3] + wv, dom[:, 3]))
+
+
+def cone_nodes(patches, inst_f, widen):
+    """(u, v) float32 (n, 5, 5) [j over v, i over u] of the cone's nodes: the 5x5 grid over each
+    patch's sampled_range."""
+    u0, u1, v0, v1 = sampled_range(patches, inst_f, widen)
     g = np.arange(5, dtype=np.float32) * F(0.25)
     u = u0[:, None, None] + (u1 - u0)[:, None, None] * g[None, None, :]
     v = v0[:, None, None] + (v1 - v0)[:, None, None] * g[None, :, None]
-    return np.broadcast_to(u, (len(r), 5, 5)), np.broadcast_to(v, (len(r), 5, 5))
+    return np.broadcast_to(u, (len(u0), 5, 5)), np.broadcast_to(v, (len(u0), 5, 5))
 
 
 def _norm(x):

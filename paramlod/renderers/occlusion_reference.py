@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod.core.layouts import CAMERA
-from paramlod.lod.reference import world_positions
+from paramlod.lod.reference import sampled_range, world_positions
 from paramlod.renderers.occlusion import GRID, pyramid_levels
 
 F32 = np.float32
@@ -52,12 +52,8 @@ def patch_bounds(render_list: np.ndarray, scene_inst, functions, cam, widen: flo
     inst_f = scene_inst[0]
     cam = np.asarray(cam, F32).reshape(CAMERA.length)
     n = len(render_list)
-    rng = render_list["range"].astype(F32)
     inst = render_list["inst"].astype(np.int64)
-    dom = inst_f[inst, 28:32]
-    wu, wv = (rng[:, 1] - rng[:, 0]) * F32(widen), (rng[:, 3] - rng[:, 2]) * F32(widen)
-    u0, u1 = np.fmax(rng[:, 0] - wu, dom[:, 0]), np.fmin(rng[:, 1] + wu, dom[:, 1])
-    v0, v1 = np.fmax(rng[:, 2] - wv, dom[:, 2]), np.fmin(rng[:, 3] + wv, dom[:, 3])
+    u0, u1, v0, v1 = sampled_range(render_list, inst_f, widen)
     t = np.arange(GRID, dtype=F32) / F32(GRID - 1)
     u = u0[:, None, None] + (u1 - u0)[:, None, None] * t[None, None, :]
     v = v0[:, None, None] + (v1 - v0)[:, None, None] * t[None, :, None]

@@ -11,7 +11,7 @@ import sympy as sp
 import paramlod as pl
 from paramlod.core.layouts import camera_record
 from paramlod.device.context import cl_device
-from paramlod.lod.reference import world_positions
+from paramlod.lod.reference import sampled_range, world_positions
 from paramlod.pipeline.driver import scene_state
 from paramlod.renderers.occlusion import DepthPyramid, pyramid_levels
 from paramlod.renderers.occlusion_reference import depth_pyramid, occluded, patch_bounds
@@ -133,12 +133,7 @@ def test_bounds_hold_every_sample(fname):
     rl = state.lod.read_render_list(n)
     bounds = state.occlusion.read_bounds(n).astype(np.float64)
     inst_f = scene.instance_buffers()[0]
-    widen = np.float32(rs.points.widen)
-    rng = rl["range"].astype(np.float32)
-    dom = inst_f[rl["inst"].astype(np.int64), 28:32]
-    wu, wv = (rng[:, 1] - rng[:, 0]) * widen, (rng[:, 3] - rng[:, 2]) * widen
-    u0, u1 = np.fmax(rng[:, 0] - wu, dom[:, 0]), np.fmin(rng[:, 1] + wu, dom[:, 1])
-    v0, v1 = np.fmax(rng[:, 2] - wv, dom[:, 2]), np.fmin(rng[:, 3] + wv, dom[:, 3])
+    u0, u1, v0, v1 = sampled_range(rl, inst_f, rs.points.widen)
     t = np.linspace(0, 1, 17, dtype=np.float32)
     u = np.broadcast_to(u0[:, None, None] + (u1 - u0)[:, None, None] * t[None, None, :], (n, 17, 17))
     v = np.broadcast_to(v0[:, None, None] + (v1 - v0)[:, None, None] * t[None, :, None], (n, 17, 17))
