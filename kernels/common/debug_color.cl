@@ -1,5 +1,5 @@
 // Debug colours of the mesh renderers and the direct points (color_by 1: a colour per cluster or patch, 2: a colour per LOD
-// level), linear RGB, shaded like a material colour. Written in the snippet dialect
+// level, 3: a colour per hybrid tier), linear RGB, shaded like a material colour. Written in the snippet dialect
 // (kernels/README.md; vec3, VEC3, FRACT, ABS, FLOAT come from common/dialect.cl or
 // common/dialect.glsl, which the includer includes first), so the same text compiles as OpenCL C
 // (included by kernels/meshlod/raster.cl) and as GLSL 4.50 (the OpenGL draw of the cut).
@@ -40,5 +40,12 @@ PL_DEBUG_FN vec3 pl_level_color(uint level) {
     if (k == 5u) return VEC3(0.80f, 0.15f, 0.85f);   // magenta
     if (k == 6u) return VEC3(0.05f, 0.80f, 0.85f);   // cyan
     return VEC3(0.95f, 0.45f, 0.05f);                  // orange
+}
+
+// The hybrid anti-aliasing tiers (thesis Figure 5.9): 0 blue, 1 green, 2 red.
+PL_DEBUG_FN vec3 pl_tier_color(uint tier) {
+    if (tier == 0u) return VEC3(0.12f, 0.30f, 0.95f);
+    if (tier == 1u) return VEC3(0.10f, 0.70f, 0.15f);
+    return VEC3(0.90f, 0.12f, 0.10f);
 }
 #endif

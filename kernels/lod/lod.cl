@@ -51,6 +51,8 @@ typedef struct {
     uint code;     // frustum outcode
 } Sample;
 
+#include "lod/spot.cl"
+
 // A sample's world position (after the instance transform), once per patch for every view;
 // w is 1 for a NaN/inf position (bad in every view).
 inline float4 lod_world(uint func, __global const float* P, __global const float* I, float u, float v) {
@@ -150,11 +152,12 @@ inline float raise_measure(float s, float need) {
     return fmax(s, fmin(BOUNDARY_CAP * s, n));
 }
 
-inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u1, float v0, float v1, uint inst) {
+inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u1, float v0, float v1, uint inst,
+                 uint tier) {
     if (slot < cap) {
         EvalPatch c;
         c.range = (float4)(u0, u1, v0, v1);
-        c.inst = inst; c.pad0 = c.pad1 = c.pad2 = 0u;
+        c.inst = inst; c.tier = tier; c.pad0 = c.pad1 = 0u;
         out[slot] = c;
     }
 }
@@ -237,6 +240,16 @@ inline bool cone_back(__global const float* cam, float4 cone, float4 sphere) {
     return ang + cone.w < M_PI_2_F;
 }
 
+// Whether lines k, k + 1 of one direction (lengths e, mixed flags m) split their half of the patch.
+inline bool split_half(const float* e, const bool* m, uint k, float t) {
+    return e[k] > t || e[k + 1u] > t || m[k] || m[k + 1u];
+}
+
+inline bool splits(const float* eu, const float* ev, const bool* mixed, float t_u, float t_v) {
+    return split_half(eu, mixed, 0u, t_u) || split_half(eu, mixed, 2u, t_u)
+        || split_half(ev, mixed + 4, 0u, t_v) || split_half(ev, mixed + 4, 2u, t_v);
+}
+
 // The decision for one measured patch: cull, render (or force out on the last step), or split
 // into 2, 3 or 4 children by the 7 patterns. seen: the views that see the patch (bit v: view v;
 // none: culled), written beside the render patch (render_views) so that the renderers skip the
@@ -250,7 +263,7 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
                        __global EvalPatch* out, uint out_cap,
                        __global RenderPatch* render, __global ulong* render_views, uint render_cap,
                        __global uint* counters, __global uint* render_count,
-                       float t_u, float t_v, uint step, uint force)
+                       float t_u, float t_v, uint step, uint force, bool promote)
 {
     uint inst = patch.inst;
     float u0 = patch.range.x, u1 = patch.range.y, v0 = patch.range.z, v1 = patch.range.w;
@@ -258,12 +271,18 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
     // back-facing in every view that sees it (one-sided instances only): culled, counted as such too
     if (back) { atomic_inc(&counters[LOD_CULLED]); atomic_inc(&counters[LOD_BACKFACE]); return; }
 
-    bool a = eu[0] > t_u || eu[1] > t_u || mixed[0] || mixed[1];   // u-lines in the lower v half
-    bool b = eu[2] > t_u || eu[3] > t_u || mixed[2] || mixed[3];   // u-lines in the upper v half
-    bool c = ev[0] > t_v || ev[1] > t_v || mixed[4] || mixed[5];   // v-lines in the left u half
-    bool d = ev[2] > t_v || ev[3] > t_v || mixed[6] || mixed[7];   // v-lines in the right u half
+    bool a = split_half(eu, mixed, 0u, t_u);       // u-lines in the lower v half
+    bool b = split_half(eu, mixed, 2u, t_u);       // u-lines in the upper v half
+    bool c = split_half(ev, mixed + 4, 0u, t_v);   // v-lines in the left u half
+    bool d = split_half(ev, mixed + 4, 2u, t_v);   // v-lines in the right u half
     bool split = a || b || c || d;
 
+    if (promote) {   // the spot check found sub-pixel detail: measured again at the next tier
+        atomic_inc(&counters[LOD_PROMOTED]);
+        uint s = atomic_add(&counters[LOD_CHILDREN], 1u);
+        emit(out, s, out_cap, u0, u1, v0, v1, inst, patch.tier + 1u);
+        return;
+    }
     if (!split || force) {
         uint slot = atomic_inc(render_count);
         if (slot < render_cap) {
@@ -274,13 +293,15 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
                              fmax(fmax(ev[0], ev[1]), fmax(ev[2], ev[3])),
                              7.0f * mu_seg, 7.0f * mv_seg);
             r.inst = inst;
-            r.flags = step | (split ? FLAG_FORCED : 0u);
+            r.flags = step | (split ? FLAG_FORCED : 0u) | (patch.tier << TIER_SHIFT);
             r.w = (float2)(w_u, w_v);
             render[slot] = r;
             render_views[slot] = seen;
         }
         atomic_inc(&counters[LOD_RENDERED]);
         if (split) atomic_inc(&counters[LOD_FORCED]);
+        if (patch.tier == 1u) atomic_inc(&counters[LOD_TIER1]);
+        if (patch.tier == 2u) atomic_inc(&counters[LOD_TIER2]);
         return;
     }
 
@@ -288,38 +309,38 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
     float mu = 0.5f * (u0 + u1), mv = 0.5f * (v0 + v1);
     if ((a || b) && (c || d)) {                 // 1:4
         uint s = atomic_add(&counters[LOD_CHILDREN], 4u);
-        emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
-        emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
-        emit(out, s + 2, out_cap, u0, mu, mv, v1, inst);
-        emit(out, s + 3, out_cap, mu, u1, mv, v1, inst);
+        emit(out, s + 0, out_cap, u0, mu, v0, mv, inst, patch.tier);
+        emit(out, s + 1, out_cap, mu, u1, v0, mv, inst, patch.tier);
+        emit(out, s + 2, out_cap, u0, mu, mv, v1, inst, patch.tier);
+        emit(out, s + 3, out_cap, mu, u1, mv, v1, inst, patch.tier);
     } else if (a && b) {                        // 1:2, cut u
         uint s = atomic_add(&counters[LOD_CHILDREN], 2u);
-        emit(out, s + 0, out_cap, u0, mu, v0, v1, inst);
-        emit(out, s + 1, out_cap, mu, u1, v0, v1, inst);
+        emit(out, s + 0, out_cap, u0, mu, v0, v1, inst, patch.tier);
+        emit(out, s + 1, out_cap, mu, u1, v0, v1, inst, patch.tier);
     } else if (c && d) {                        // 1:2, cut v
         uint s = atomic_add(&counters[LOD_CHILDREN], 2u);
-        emit(out, s + 0, out_cap, u0, u1, v0, mv, inst);
-        emit(out, s + 1, out_cap, u0, u1, mv, v1, inst);
+        emit(out, s + 0, out_cap, u0, u1, v0, mv, inst, patch.tier);
+        emit(out, s + 1, out_cap, u0, u1, mv, v1, inst, patch.tier);
     } else if (a) {                             // 1:3, lower v half cut in u
         uint s = atomic_add(&counters[LOD_CHILDREN], 3u);
-        emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
-        emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
-        emit(out, s + 2, out_cap, u0, u1, mv, v1, inst);
+        emit(out, s + 0, out_cap, u0, mu, v0, mv, inst, patch.tier);
+        emit(out, s + 1, out_cap, mu, u1, v0, mv, inst, patch.tier);
+        emit(out, s + 2, out_cap, u0, u1, mv, v1, inst, patch.tier);
     } else if (b) {                             // 1:3, upper v half cut in u
         uint s = atomic_add(&counters[LOD_CHILDREN], 3u);
-        emit(out, s + 0, out_cap, u0, u1, v0, mv, inst);
-        emit(out, s + 1, out_cap, u0, mu, mv, v1, inst);
-        emit(out, s + 2, out_cap, mu, u1, mv, v1, inst);
+        emit(out, s + 0, out_cap, u0, u1, v0, mv, inst, patch.tier);
+        emit(out, s + 1, out_cap, u0, mu, mv, v1, inst, patch.tier);
+        emit(out, s + 2, out_cap, mu, u1, mv, v1, inst, patch.tier);
     } else if (c) {                             // 1:3, left u half cut in v
         uint s = atomic_add(&counters[LOD_CHILDREN], 3u);
-        emit(out, s + 0, out_cap, u0, mu, v0, mv, inst);
-        emit(out, s + 1, out_cap, u0, mu, mv, v1, inst);
-        emit(out, s + 2, out_cap, mu, u1, v0, v1, inst);
+        emit(out, s + 0, out_cap, u0, mu, v0, mv, inst, patch.tier);
+        emit(out, s + 1, out_cap, u0, mu, mv, v1, inst, patch.tier);
+        emit(out, s + 2, out_cap, mu, u1, v0, v1, inst, patch.tier);
     } else {                                    // 1:3, right u half cut in v
         uint s = atomic_add(&counters[LOD_CHILDREN], 3u);
-        emit(out, s + 0, out_cap, u0, mu, v0, v1, inst);
-        emit(out, s + 1, out_cap, mu, u1, v0, mv, inst);
-        emit(out, s + 2, out_cap, mu, u1, mv, v1, inst);
+        emit(out, s + 0, out_cap, u0, mu, v0, v1, inst, patch.tier);
+        emit(out, s + 1, out_cap, mu, u1, v0, mv, inst, patch.tier);
+        emit(out, s + 2, out_cap, mu, u1, mv, v1, inst, patch.tier);
     }
 }
 
@@ -391,7 +412,11 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
               __global const float* params, __global const float* cam, uint n_views,
               float t_u, float t_v, uint step, uint force,
               uint backface, float widen,   // back-face culling on; the sampling range's widening
-              float curve_cos)   // cos of LodSettings.detail_angle (line_turns)
+              float curve_cos,   // cos of LodSettings.detail_angle (line_turns)
+              // hybrid tiers (max_tier 0: off): tiers 1, 2's thresholds (t_u, t_v each) and pixel
+              // divisors, the spot check's cosine and count (lod/spot.cl)
+              uint max_tier, float4 tier_t, float2 tier_scale, float spot_cos, uint spot_min,
+              uint silhouettes)   // hybrid: patches with a silhouette go from tier 0 to tier 1
 {
     __local float4 wpos[LOD_SAMPLES];                      // world position; w: 1 for a bad sample
     __local float2 pos[LOD_SLOTS * LOD_SAMPLES];           // screen positions of a chunk's views
@@ -408,6 +433,8 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
     // back-face culling: the 25 nodes' world positions and partials, the cone and sphere
     __local float4 cnode[3 * CONE_NODES];
     __local float4 cone[2];
+    __local float4 spot_n[SPOT_CORNERS];   // the spot check's corner normals
+    __local uint spot_count;
     uint n_in = min(counters[(step - 1) * LOD_COUNTERS + LOD_CHILDREN], cap);
     __global uint* c = counters + step * LOD_COUNTERS;
     __global uint* render_count = counters + LOD_RENDER_TOTAL;
@@ -538,19 +565,50 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
             if (one_sided && !cone_back(cam + v * CAM_FLOATS, cone[0], cone[1])) atomic_or(&comb[19], 1u);
         }
         barrier(CLK_LOCAL_MEM_FENCE);
+        // every work-item reads the measures (the spot check's branch must be the group's)
+        float eu[4], ev[4];
+        bool mixed[8];
+        for (uint k = 0; k < 4u; ++k) { eu[k] = as_float(comb[k]); ev[k] = as_float(comb[4u + k]); }
+        float most_u = fmax(fmax(eu[0], eu[1]), fmax(eu[2], eu[3]));
+        float most_v = fmax(fmax(ev[0], ev[1]), fmax(ev[2], ev[3]));
+        for (uint k = 0; k < 8u; ++k)
+            mixed[k] = ((comb[12] >> k) & 1u) || (((comb[20] >> k) & 1u) && (k < 4u ? most_u : most_v) < CURVE_MAX_PX);
+        ulong seen = (ulong)comb[17] | ((ulong)comb[18] << 32);
+        bool back = one_sided && comb[19] == 0u;
+        // the patch's tier's thresholds (tier 0: t_u, t_v; hybrid tiers 1, 2: tier_t)
+        uint tier = patch.tier;
+        float tu = tier == 0u ? t_u : tier == 1u ? tier_t.x : tier_t.z;
+        float tv = tier == 0u ? t_v : tier == 1u ? tier_t.y : tier_t.w;
+        // about to be rendered at a tier that has a finer one: a silhouette in a view that sees it
+        // (tier 0 only) or the spot check (lod/spot.cl) sends it on
+        bool candidate = tier < max_tier && !force && seen != 0ul && !back && !splits(eu, ev, mixed, tu, tv);
+        bool promote = false;
+        if (candidate && tier == 0u && silhouettes != 0u)
+            for (uint v = 0; v < n_views && !promote; ++v)
+                promote = vseen[v] && grid_silhouette(wpos + 64, cam + v * CAM_FLOATS);
+        if (candidate && !promote) {
+            float scale = tier == 0u ? 1.0f : tier_scale.x;
+            float cu = spot_cell(patch.range.y - patch.range.x, most_u, scale, 7.0f);
+            float cv = spot_cell(patch.range.w - patch.range.z, most_v, scale, 3.0f);
+            if (l == 0u) spot_count = 0u;
+            for (uint k = l; k < SPOT_CORNERS; k += LOD_GROUP) {
+                float2 c = spot_corner(patch.range, cu, cv, k);
+                spot_n[k] = (float4)(spot_normal(func, P, I, c.x, c.y), 0.0f);
+            }
+            barrier(CLK_LOCAL_MEM_FENCE);
+            uint mine = 0u;
+            for (uint k = l; k < SPOT_SUBS; k += LOD_GROUP)
+                mine += spot_turns(func, P, I, patch.range, cu, cv, spot_n, k, spot_cos) ? 1u : 0u;
+            if (mine) atomic_add(&spot_count, mine);
+            barrier(CLK_LOCAL_MEM_FENCE);
+            promote = spot_count >= spot_min;
+        }
         if (l == 0u) {
-            float eu[4], ev[4];
-            bool mixed[8];
-            for (uint k = 0; k < 4u; ++k) { eu[k] = as_float(comb[k]); ev[k] = as_float(comb[4u + k]); }
-            float most_u = fmax(fmax(eu[0], eu[1]), fmax(eu[2], eu[3]));
-            float most_v = fmax(fmax(ev[0], ev[1]), fmax(ev[2], ev[3]));
-            for (uint k = 0; k < 8u; ++k)
-                mixed[k] = ((comb[12] >> k) & 1u) || (((comb[20] >> k) & 1u) && (k < 4u ? most_u : most_v) < CURVE_MAX_PX);
             float4 box = (float4)(box_float((int)comb[13]), box_float((int)comb[14]),
                                   box_float((int)comb[15]), box_float((int)comb[16]));
             lod_decide(patch, eu, ev, mixed, as_float(comb[8]), as_float(comb[9]),
-                       as_float(comb[10]), as_float(comb[11]), box, (ulong)comb[17] | ((ulong)comb[18] << 32),
-                       one_sided && comb[19] == 0u, out, cap, render, render_views, render_cap, c, render_count, t_u, t_v, step, force);
+                       as_float(comb[10]), as_float(comb[11]), box, seen,
+                       back, out, cap, render, render_views, render_cap, c, render_count, tu, tv, step, force, promote);
         }
         // no barrier here: the next patch clears the other set of comb
     }

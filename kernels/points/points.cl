@@ -7,7 +7,8 @@
 
 // The debug colouring of the direct variant (PointSettings.color_by): 1 a colour per render patch,
 // keyed by its parameter range and instance (the render list's order varies between devices and
-// frames, its patches do not), 2 a colour per LOD step the patch was made in. Twin:
+// frames, its patches do not), 2 a colour per LOD step the patch was made in, 3 a colour per
+// hybrid tier. Twin:
 // paramlod.renderers.sampling.patch_debug_colors.
 inline float4 debug_material(float4 mat, RenderPatch rp, uint color_by) {
     if (color_by == 1u) {
@@ -15,6 +16,7 @@ inline float4 debug_material(float4 mat, RenderPatch rp, uint color_by) {
         return (float4)(pl_cluster_color(k), mat.w);
     }
     if (color_by == 2u) return (float4)(pl_level_color(rp.flags & 15u), mat.w);
+    if (color_by == 3u) return (float4)(pl_tier_color((rp.flags >> TIER_SHIFT) & 3u), mat.w);
     return mat;
 }
 
@@ -223,14 +225,18 @@ inline uint patch_chunks(RenderPatch rp, float factor, uint measure, uint max_si
 
 // One work-item per patch: one 64-bit atomic gives the patch both its place in the schedule and
 // its first chunk, so first chunks increase with the place (points_direct searches them).
-// order[place] = first chunk << 32 | patch index.
+// order[place] = first chunk << 32 | patch index. `tier`: only the patches of that hybrid tier
+// are listed (ALL_TIERS: every patch).
+#define ALL_TIERS 0xFFFFFFFFu
 __kernel void points_schedule(__global const RenderPatch* patches, __global const uint* count,
                               uint count_at, uint capacity, float factor, uint measure,
-                              uint max_side, __global ulong* order, __global ulong* counters)
+                              uint max_side, uint tier, __global ulong* order, __global ulong* counters)
 {
     uint n_patches = min(count[count_at], capacity);
     for (uint pid = get_global_id(0); pid < n_patches; pid += get_global_size(0)) {
-        ulong k = patch_chunks(patches[pid], factor, measure, max_side);
+        RenderPatch rp = patches[pid];
+        if (tier != ALL_TIERS && ((rp.flags >> TIER_SHIFT) & 3u) != tier) continue;
+        ulong k = patch_chunks(rp, factor, measure, max_side);
         ulong old = atom_add(&counters[SCHED_AT], (1ul << CHUNK_BITS) | k);
         order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
     }
@@ -239,8 +245,7 @@ __kernel void points_schedule(__global const RenderPatch* patches, __global cons
 // Samples written straight into the shared key buffers with early depth (write_point reads
 // before it issues an atom_min).
 __kernel __attribute__((reqd_work_group_size(POINTS_LOCAL, 1, 1)))
-void points_direct(__global const RenderPatch* patches, __global const uint* count,
-                   uint count_at, uint capacity, __global const ulong* order,
+void points_direct(__global const RenderPatch* patches, __global const ulong* order,
                    __global const float* inst_f, __global const uint* inst_u,
                    __global const float* params, __global const float4* materials,
                    __global const float* cam, uint n_views, __global const ulong* view_masks,
@@ -254,7 +259,7 @@ void points_direct(__global const RenderPatch* patches, __global const uint* cou
 #endif
                    )
 {
-    uint n_patches = min(count[count_at], capacity);
+    uint n_patches = (uint)(counters[SCHED_AT] >> CHUNK_BITS);   // the patches listed
     ulong total = counters[SCHED_AT] & CHUNK_MASK;
     ulong groups = get_num_groups(0), group = get_group_id(0);
     uint c = (uint)(group * total / groups), c_end = (uint)((group + 1) * total / groups);

@@ -11,6 +11,9 @@
 #define PL_SS 2         // subsamples per pixel side
 #endif
 #define SS_COUNT (PL_SS * PL_SS)
+#ifndef PL_RATIO
+#define PL_RATIO 2      // upsample_keys: a finer hybrid tier's subsamples per coarser key and side
+#endif
 #define CLEAR_KEY 0xFFFFFFFFFFFFFFFFul
 
 // sRGB8 -> linear in fixed point through lin[256], and back through the 256 thresholds thr[]
@@ -72,4 +75,18 @@ __kernel void downsample_keys(__global const ulong* color_ss, __global const ulo
     resolve_subsamples(k, a, lin, thr, &key, &ax);
     color[i] = key;
     aux[i] = ax;
+}
+
+// Hybrid tiers: one work-item per key of the finer buffer, (W * PL_RATIO) x (H * PL_RATIO), takes
+// the key of the coarser buffer's pixel it lies in (colour and aux: every subsample starts as the
+// coarse sample, which the finer tier's samples then depth-test against). Plain stores: the
+// finer buffer holds nothing yet. Layers are rows of one tall image, as in downsample_keys.
+__kernel void upsample_keys(__global const ulong* color, __global const ulong* aux, uint W, uint H,
+                            __global ulong* color_fine, __global ulong* aux_fine)
+{
+    uint i = get_global_id(0), FW = W * PL_RATIO;
+    if (i >= FW * H * PL_RATIO) return;
+    uint src = (i / FW / PL_RATIO) * W + (i % FW) / PL_RATIO;
+    color_fine[i] = color[src];
+    aux_fine[i] = aux[src];
 }

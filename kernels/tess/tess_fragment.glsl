@@ -4,6 +4,8 @@
 //   0 colour RGBA16F (linear RGB, alpha 1: alpha 0 = nothing drawn), 1 linear view depth R32F,
 //   2 world-space normal facing the viewer RGBA16F, 3 object id R32UI.
 // Multi-view geometry-stage passes (PL_VIEWS): the same, for the view of the layer drawn into.
+// u_tier >= 0 (TessSettings.color_by "tier"): the patch is shaded with that hybrid tier's debug
+// colour (common/debug_color.cl) instead of its material's.
 centroid in vec3 te_view;
 centroid in vec3 te_normal;
 centroid in float te_bad;
@@ -16,15 +18,18 @@ layout(location = 2) out vec4 out_normal;
 layout(location = 3) out uint out_object;
 
 uniform vec4 u_light;   // the light record: towards the light in view space (xyz), ambient share (w)
+uniform int u_tier;     // -1: the material's colour; else the tier the patches drawn belong to
 
 #include "common/dialect.glsl"
 #include "common/shading.cl"
+#include "common/debug_color.cl"
 
 void main() {
     if (te_bad > 0.0) discard;
     vec3 ev = normalize(-te_view);
     vec3 n = pl_facing_normal(te_normal, ev);
-    vec3 rgb = pl_shade_rgb(n, ev, te_material.xyz, te_material.w, u_light.xyz, u_light.w);
+    vec3 base = u_tier < 0 ? te_material.xyz : pl_tier_color(uint(u_tier));
+    vec3 rgb = pl_shade_rgb(n, ev, base, te_material.w, u_light.xyz, u_light.w);
     out_color = vec4(clamp(rgb, 0.0, 1.0), 1.0);
     out_depth = -te_view.z;
 #ifdef PL_VIEWS

@@ -34,7 +34,7 @@ from paramlod.surfels.render import FixedCount, FixedSize
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation", "camera_path"}   # camera_path: docs/scale-out.md
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches", "patch_budget",
-               "detail_angle",
+               "detail_angle", "spot_angle", "spot_share", "color_by",
                "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "two_sided", "translate", "rotate", "scale", "matrix", "variant",
                "instances", "sh_field", "surfels", "mesh", "lod", "skinned", "animation", "time"}
@@ -179,12 +179,22 @@ def load_scene(path, size=None) -> SceneFile:
                         patch_budget=ck.num(r, "patch_budget", "render", "render", default=LodSettings.patch_budget,
                                             lo=1, integer=True),
                         detail_angle=ck.num(r, "detail_angle", "render", "render", default=LodSettings.detail_angle,
-                                            lo=1, hi=180)),
+                                            lo=1, hi=180),
+                        spot_angle=ck.num(r, "spot_angle", "render", "render", default=LodSettings.spot_angle,
+                                          lo=1, hi=179),
+                        spot_share=ck.num(r, "spot_share", "render", "render", default=LodSettings.spot_share,
+                                          lo=0.001, hi=1)),
         points=PointSettings(density=ck.num(r, "density", "render", "render", default=PointSettings.density, lo=0.1, hi=16)))
     background = ck.vec(r, "background", 3, "render", "render", default=[0.12, 0.12, 0.14])
     settings.tess = _tess_settings(r, ck)
     settings.mesh.threshold_px = ck.num(r, "mesh_threshold", "render", "render", default=settings.mesh.threshold_px,
                                         lo=0, hi=1e6)
+    if "color_by" in r:   # the point variant's debug colouring ("tier": the hybrid tiers)
+        settings.points.color_by = r["color_by"]
+        try:
+            settings.points.validate()
+        except ParamlodError as exc:
+            ck.fail("render.color_by", str(exc), "render", None, "color_by")
     if "mesh_color_by" in r:
         settings.mesh.color_by = r["mesh_color_by"]
         try:

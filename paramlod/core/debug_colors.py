@@ -30,3 +30,11 @@ LEVEL_COLORS = np.array([[0.85, 0.85, 0.85], [0.90, 0.12, 0.10], [0.10, 0.70, 0.
 def level_color(level) -> np.ndarray:
     """pl_level_color: float32 [..., 3] of LOD levels (eight colours, repeating)."""
     return LEVEL_COLORS[np.asarray(level, np.int64) % 8]
+
+
+TIER_COLORS = np.array([[0.12, 0.30, 0.95], [0.10, 0.70, 0.15], [0.90, 0.12, 0.10]], np.float32)
+
+
+def tier_color(tier) -> np.ndarray:
+    """pl_tier_color: float32 [..., 3] of hybrid anti-aliasing tiers (0 blue, 1 green, 2 red)."""
+    return TIER_COLORS[np.minimum(np.asarray(tier, np.int64), 2)]

@@ -194,7 +194,10 @@ LOD_COUNTER = Record(
         Field("split", UINT), Field("culled", UINT), Field("rendered", UINT),
         Field("forced", UINT, 1, "rendered although they would split (last step)"),
         Field("backface", UINT, 1, "culled as back-facing (also counted in culled)"),
-        Field("spare", UINT, 2),
+        Field("promoted", UINT, 1, "re-queued to a finer hybrid tier by the spot check (also in children)"),
+        Field("tier1", UINT, 1, "rendered at hybrid tier 1 (also in rendered)"),
+        Field("tier2", UINT, 1, "rendered at hybrid tier 2 (also in rendered)"),
+        Field("spare", UINT, 1),
     ], prefix="LOD", size="LOD_COUNTERS",
     constants=[Constant("LOD_RENDER_TOTAL", 1, False, "counters[LOD_RENDER_TOTAL]: the render list's length")])
 
@@ -202,7 +205,8 @@ EVAL_PATCH = Record(
     "eval patch", "a patch waiting for evaluation in an LOD step", [
         Field("range", FLOAT, 4, "u0, u1, v0, v1"),
         Field("inst", UINT),
-        Field("pad", UINT, 3),
+        Field("tier", UINT, 1, "hybrid anti-aliasing tier (0 coarsest; 0 without hybrid)"),
+        Field("pad", UINT, 2),
     ], struct="EvalPatch")
 
 RENDER_PATCH = Record(
@@ -213,10 +217,11 @@ RENDER_PATCH = Record(
         # s_u, s_v: 7 x the longest single segment, an upper estimate for even sampling
         Field("ext", FLOAT, 4, "e_u, e_v, s_u, s_v in pixels"),
         Field("inst", UINT),
-        Field("flags", UINT, 1, "bits 0-3: LOD step; bit 4: forced at the last step"),
+        Field("flags", UINT, 1, "bits 0-3: LOD step; bit 4: forced at the last step; bits 5-6: hybrid tier"),
         Field("w", FLOAT, 2, "w_u, w_v: s_u, s_v raised to what the patch's four boundary lines need (the direct points renderer)"),
     ], struct="RenderPatch",
-    constants=[Constant("FLAG_FORCED", 16, True, "RenderPatch.flags: forced out at the last step")])
+    constants=[Constant("FLAG_FORCED", 16, True, "RenderPatch.flags: forced out at the last step"),
+               Constant("TIER_SHIFT", 5, False, "RenderPatch.flags >> TIER_SHIFT & 3: the hybrid tier")])
 
 CLUSTER = Record(
     "cluster", "one cluster of a mesh's LOD DAG (paramlod.meshlod; object space). A cluster is drawn "

@@ -7,6 +7,12 @@ from paramlod.core.layouts import EVAL_PATCH, RENDER_PATCH
 EVAL_DTYPE = EVAL_PATCH.dtype       # 32 bytes: range, inst, pad
 RENDER_DTYPE = RENDER_PATCH.dtype   # 64 bytes: range, bbox, ext, inst, flags, pad
 FLAG_FORCED = RENDER_PATCH.constant("FLAG_FORCED")   # RenderPatch.flags bit: forced out at the last step
+TIER_SHIFT = RENDER_PATCH.constant("TIER_SHIFT")     # RenderPatch.flags >> TIER_SHIFT & 3: the hybrid tier
+
+
+def render_tiers(render_list: np.ndarray) -> np.ndarray:
+    """The hybrid anti-aliasing tier of each render patch (0, 1, 2; 0 without hybrid)."""
+    return (render_list["flags"] >> np.uint32(TIER_SHIFT)) & np.uint32(3)
 
 
 def initial_patches(domains: np.ndarray, grid=(1, 1)) -> np.ndarray:

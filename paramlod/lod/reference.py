@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod.core.layouts import CAMERA
-from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, FLAG_FORCED, initial_patches
-from paramlod.lod.stage import check_budget
+from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, FLAG_FORCED, TIER_SHIFT, initial_patches
+from paramlod.lod.stage import check_budget, tier_values
 from paramlod.lod.uploads import ONE_SIDED, instance_flags
 
 F = np.float32
@@ -224,13 +224,16 @@ def backfacing(patches, scene_inst, functions, cams, seen, widen) -> np.ndarray:
 
 
 def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force, backface=True, widen=0.25,
-             curve_cos=F(-2)):
+             curve_cos=F(-2), hybrid=None):
     """One PATCH SUBDIVISION step; ``cam``: one or more camera records (``camera_rows``);
     ``backface``: cull the back-facing patches of one-sided instances, whose cones hold over the
-    patch widened by ``widen`` per side. Returns (children, render patches, stats)."""
+    patch widened by ``widen`` per side; ``hybrid``: None, or the kernel's (max_tier, tier_t,
+    tier_scale, spot_cos, spot_min, silhouettes) (stage.tier_values, LodSettings.spot,
+    LodSettings.spot_silhouettes). Returns (children, render patches, stats)."""
     n = len(patches)
     r = patches["range"].astype(np.float32)
     inst = patches["inst"]
+    tier = patches["tier"].astype(np.uint32)
     m = _measure(patches, scene_inst, functions, cam, curve_cos)
 
     seen = m["code"] == 0
@@ -250,20 +253,39 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force, backfac
     hi = np.where(seen[:, :, None], m["box"][:, :, 2:], -big).max(axis=0)
     bx0, by0, bx1, by1 = lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]
 
-    tu, tv = F(t_u), F(t_v)
+    max_tier, tier_t, tier_scale, spot_cos, spot_min, silhouettes = hybrid or (0, np.zeros(4, F), np.ones(2, F), F(1), 1,
+                                                                               False)
+    # each patch's tier's thresholds (lod.cl: tier 0 t_u, t_v; tiers 1, 2 tier_t)
+    tu = np.where(tier == 0, F(t_u), np.where(tier == 1, tier_t[0], tier_t[2])).astype(F)
+    tv = np.where(tier == 0, F(t_v), np.where(tier == 1, tier_t[1], tier_t[3])).astype(F)
     a = (eu[:, 0] > tu) | (eu[:, 1] > tu) | mu_[:, 0] | mu_[:, 1]
     b = (eu[:, 2] > tu) | (eu[:, 3] > tu) | mu_[:, 2] | mu_[:, 3]
     c = (ev[:, 0] > tv) | (ev[:, 1] > tv) | mv_[:, 0] | mv_[:, 1]
     d = (ev[:, 2] > tv) | (ev[:, 3] > tv) | mv_[:, 2] | mv_[:, 3]
     split = a | b | c | d
-    to_render = ~culled & (~split | bool(force))
+    # patches about to be rendered at a tier that has a finer one: a silhouette (from tier 0) or
+    # the spot check sends them on
+    candidate = (tier < max_tier) & (not force) & ~culled & ~split
+    edge = np.zeros(n, bool)
+    if silhouettes and (candidate & (tier == 0)).any():
+        idx = np.flatnonzero(candidate & (tier == 0))
+        edge[idx] = grid_silhouettes(patches[idx], scene_inst, functions, camera_rows(cam), seen[:, idx])
+    promote = candidate & ~edge
+    if promote.any():
+        idx = np.flatnonzero(promote)
+        scale = np.where(tier[idx] == 0, F(1), tier_scale[0]).astype(F)
+        counts = spot_counts(patches[idx], scene_inst, functions, eu.max(axis=1)[idx], ev.max(axis=1)[idx], scale,
+                             spot_cos)
+        promote[idx] = counts >= spot_min
+    promote |= edge
+    to_render = ~culled & (~split | bool(force)) & ~promote
     rp = np.zeros(int(to_render.sum()), RENDER_DTYPE)
     rp["range"] = r[to_render]
     rp["bbox"] = np.stack([bx0, by0, bx1, by1], axis=1)[to_render]
     rp["ext"] = np.stack([eu.max(axis=1), ev.max(axis=1), F(7) * msu, F(7) * msv], axis=1)[to_render]
     rp["inst"] = inst[to_render]
     rp["w"] = np.stack([w_u, w_v], axis=1)[to_render]
-    rp["flags"] = step | np.where(split[to_render], FLAG_FORCED, 0)
+    rp["flags"] = step | np.where(split[to_render], FLAG_FORCED, 0) | (tier[to_render] << np.uint32(TIER_SHIFT))
 
     children = []
     sp = ~culled & split & (not force)
@@ -284,29 +306,37 @@ def lod_step(patches, scene_inst, functions, cam, t_u, t_v, step, force, backfac
             ch = np.zeros(int(mask.sum()), EVAL_DTYPE)
             ch["range"] = np.stack([x[mask] for x in rect], axis=1)
             ch["inst"] = inst[mask]
+            ch["tier"] = tier[mask]
             children.append(ch)
-    children = np.concatenate(children) if children else np.zeros(0, EVAL_DTYPE)
+    again = np.zeros(int(promote.sum()), EVAL_DTYPE)   # measured again at the next tier
+    again["range"], again["inst"], again["tier"] = r[promote], inst[promote], tier[promote] + 1
+    children = np.concatenate(children + [again])
+    rendered_tier = tier[to_render]
     stats = {"step": step, "in": n, "split": int(sp.sum()), "culled": int(culled.sum()),
-             "out": int(to_render.sum()), "forced": int((to_render & split).sum()), "backface": int(back.sum())}
+             "out": int(to_render.sum()), "forced": int((to_render & split).sum()), "backface": int(back.sum()),
+             "promoted": int(promote.sum()), "tiers": [int((rendered_tier == t).sum()) for t in range(3)]}
     return children, rp, stats
 
 
-def run_lod(scene, camera_records, settings, functions=None):
+def run_lod(scene, camera_records, settings, functions=None, tiers=None):
     """The whole LOD stage in numpy for one or more views (``camera_records``: their records one
-    after another, or as rows): returns (render patches, per-step stats)."""
+    after another, or as rows); ``tiers``: hybrid tiers 1 and 2's (divisor, scale), as LodStage.enqueue:
+    returns (render patches, per-step stats)."""
     functions = functions or scene.functions()
     inst_f, inst_u, params = scene.instance_buffers()
     inst = (inst_f, instance_flags(scene, inst_u), params)   # the flags SceneBuffers sends
     patches = initial_patches(inst[0][:, 28:32], settings.initial_grid)
     out, steps, made = [], [], 0
+    hybrid = (*tier_values(settings, tiers), *settings.spot(), settings.spot_silhouettes) if tiers is not None else None
     for step in range(1, settings.max_steps + 1):
         if len(patches) == 0:
-            steps.append({"step": step, "in": 0, "split": 0, "culled": 0, "out": 0, "forced": 0, "backface": 0})
+            steps.append({"step": step, "in": 0, "split": 0, "culled": 0, "out": 0, "forced": 0, "backface": 0,
+                          "promoted": 0, "tiers": [0, 0, 0]})
             continue
         patches, rp, st = lod_step(patches, inst, functions, camera_rows(camera_records),
                                    settings.threshold[0], settings.threshold[1], step,
                                    step == settings.max_steps, settings.backface_cull, settings.backface_widen,
-                                   settings.curve_cos())
+                                   settings.curve_cos(), hybrid)
         out.append(rp)
         steps.append(st)
         made += len(patches)
@@ -341,6 +371,21 @@ def cone_nodes(patches, inst_f, widen):
     return np.broadcast_to(u, (len(u0), 5, 5)), np.broadcast_to(v, (len(u0), 5, 5))
 
 
+def object_surface(scene_inst, functions, inst, u, v):
+    """f and its partials in object space, float32 (..., 3) each, at parameters ``u``, ``v`` of
+    instances ``inst`` (arrays of one shape)."""
+    inst_f, inst_u, params = scene_inst
+    pos = np.full(u.shape + (3,), np.nan, np.float32)
+    fu, fv = pos.copy(), pos.copy()
+    for i in np.unique(inst):
+        sel = inst == i
+        fn = functions[inst_u[i, 0]]
+        block = params[inst_u[i, 1]: inst_u[i, 1] + fn.param_count]
+        p, a, b = fn.surface(u[sel].astype(np.float64), v[sel].astype(np.float64), block)
+        pos[sel], fu[sel], fv[sel] = p.astype(np.float32), a.astype(np.float32), b.astype(np.float32)
+    return pos, fu, fv
+
+
 def _norm(x):
     return np.sqrt((x * x).sum(axis=-1, dtype=np.float32)).astype(np.float32)
 
@@ -349,18 +394,11 @@ def normal_cones(patches, scene_inst, functions, widen):
     """Twin of lod.cl normal_cone: per patch the normal cone (axis xyz, half-angle; 4 where there is
     none) and bounding sphere (centre xyz, radius) in world space, float32 (n, 4) each, holding
     over the patch widened by ``widen`` per side (under the bound's assumption, docs/lod.md)."""
-    inst_f, inst_u, params = scene_inst
+    inst_f = scene_inst[0]
     n = len(patches)
     u, v = cone_nodes(patches, inst_f, widen)
     inst = patches["inst"]
-    pos = np.full((n, 5, 5, 3), np.nan, np.float32)
-    fu, fv = pos.copy(), pos.copy()
-    for i in np.unique(inst):
-        sel = inst == i
-        fn = functions[inst_u[i, 0]]
-        block = params[inst_u[i, 1]: inst_u[i, 1] + fn.param_count]
-        p, a, b = fn.surface(u[sel].astype(np.float64), v[sel].astype(np.float64), block)
-        pos[sel], fu[sel], fv[sel] = p.astype(np.float32), a.astype(np.float32), b.astype(np.float32)
+    pos, fu, fv = object_surface(scene_inst, functions, np.broadcast_to(inst[:, None, None], u.shape), u, v)
     M = inst_f[inst, 0:16].reshape(n, 4, 4)
     A = M[:, :3, :3]
     with np.errstate(all="ignore"):
@@ -409,3 +447,82 @@ def cone_back(cam, cone, sphere) -> np.ndarray:
             ok = d > sphere[:, 3]
             ang = np.arctan2(_norm(np.cross(a, c)), (a * c).sum(-1, dtype=np.float32)) + np.arcsin(sphere[:, 3] / d)
         return ok & (cone[:, 3] < HALF_PI) & ((ang + cone[:, 3]).astype(np.float32) < HALF_PI)
+
+
+# --- the hybrid tiers' spot check (kernels/lod/spot.cl) -------------------------------------------
+SPOT_OFFSETS = np.array([0.5, 1.0 / 3.0, 0.2], np.float32)   # spot.cl spot_offset
+
+
+def spot_normals(scene_inst, functions, inst, u, v):
+    """Twin of spot.cl spot_normal: unit world-space normals (..., 3) from the analytic partials,
+    0 where f or the partials are not finite or the normal vanishes."""
+    pos, fu, fv = object_surface(scene_inst, functions, inst, u, v)
+    A = scene_inst[0][inst, 0:16].reshape(inst.shape + (4, 4))[..., :3, :3]
+    with np.errstate(all="ignore"):
+        n = np.cross(np.einsum("...ij,...j->...i", A, fu), np.einsum("...ij,...j->...i", A, fv)).astype(F)
+        ln = _norm(n)
+        ok = (ln > 0) & np.isfinite(ln) & np.all(np.isfinite(pos), axis=-1)
+        return np.where(ok[..., None], n / np.where(ok, ln, F(1))[..., None], F(0)).astype(F)
+
+
+def spot_counts(patches, scene_inst, functions, most_u, most_v, scale, spot_cos) -> np.ndarray:
+    """Twin of the spot check (spot.cl): per patch, how many of its 189 sub-samples have a normal
+    that turns from its cell's blended corner normals by more than acos(``spot_cos``). ``most_u``,
+    ``most_v``: the patch's longest measured lines in frame pixels; ``scale``: its tier's divisor."""
+    r = patches["range"].astype(F)
+    inst = patches["inst"]
+    n = len(r)
+    cu = ((r[:, 1] - r[:, 0]) / np.fmax(F(most_u) * scale, F(7))).astype(F)
+    cv = ((r[:, 3] - r[:, 2]) / np.fmax(F(most_v) * scale, F(3))).astype(F)
+    uc, vc = F(0.5) * (r[:, 0] + r[:, 1]), F(0.5) * (r[:, 2] + r[:, 3])
+    cu_, cv_ = cu[:, None, None], cv[:, None, None]
+    ui = uc[:, None, None] + (np.arange(8, dtype=F) - F(3.5))[None, None, :] * cu_       # (n, 1, 8)
+    vj = vc[:, None, None] + (np.arange(4, dtype=F) - F(1.5))[None, :, None] * cv_       # (n, 4, 1)
+    ui, vj = np.broadcast_to(ui, (n, 4, 8)), np.broadcast_to(vj, (n, 4, 8))
+    corners = spot_normals(scene_inst, functions, np.broadcast_to(inst[:, None, None], (n, 4, 8)), ui, vj)
+    a = np.tile(SPOT_OFFSETS, 3)     # offset o: a = OFFSETS[o % 3], b = OFFSETS[o // 3]
+    b = np.repeat(SPOT_OFFSETS, 3)
+    # sub-samples (n, 3 cells v, 7 cells u, 9 offsets)
+    su = ui[:, :3, :7, None] + a * cu[:, None, None, None]
+    sv = vj[:, :3, :7, None] + b * cv[:, None, None, None]
+    ns = spot_normals(scene_inst, functions, np.broadcast_to(inst[:, None, None, None], su.shape), su, sv)
+    n00, n10 = corners[:, :3, :7, None], corners[:, :3, 1:, None]
+    n01, n11 = corners[:, 1:, :7, None], corners[:, 1:, 1:, None]
+    w = lambda x: x[..., None]   # noqa: E731  (weights over the vector axis)
+    blend = (w((F(1) - a) * (F(1) - b)) * n00 + w(a * (F(1) - b)) * n10 + w((F(1) - a) * b) * n01
+             + w(a * b) * n11).astype(F)
+    known = [np.any(x != 0, axis=-1) for x in (n00, n10, n01, n11, ns)]
+    ok = np.logical_and.reduce(np.broadcast_arrays(*known))
+    turns = ok & ((ns * blend).sum(-1, dtype=F) < F(spot_cos) * _norm(blend))
+    return turns.reshape(n, -1).sum(axis=1)
+
+
+def grid_silhouettes(patches, scene_inst, functions, cams, seen) -> np.ndarray:
+    """Twin of spot.cl grid_silhouette: per patch, whether in some view that sees it (``seen``:
+    (views, n)) the finite-difference normals of its 5 x 5 grid face both towards and away."""
+    r = patches["range"].astype(F)
+    n = len(r)
+    g = np.arange(5, dtype=F) * F(0.25)
+    u0, u1, v0, v1 = (r[:, i, None, None] for i in range(4))
+    gu = np.broadcast_to(u0 + (u1 - u0) * g[None, None, :], (n, 5, 5))    # [patch, j over v, i over u]
+    gv = np.broadcast_to(v0 + (v1 - v0) * g[None, :, None], (n, 5, 5))
+    w, bad = world_positions(scene_inst, functions, np.broadcast_to(patches["inst"][:, None, None], (n, 5, 5)), gu, gv)
+    up, um = [min(i + 1, 4) for i in range(5)], [max(i - 1, 0) for i in range(5)]
+    with np.errstate(all="ignore"):
+        nrm = np.cross(w[:, :, up] - w[:, :, um], w[:, up, :] - w[:, um, :]).astype(F)
+    ok = ~(bad | bad[:, :, up] | bad[:, :, um] | bad[:, up, :] | bad[:, um, :])
+    out = np.zeros(n, bool)
+    for view, cam in enumerate(cams):
+        V = cam[0:16].reshape(4, 4)
+        with np.errstate(all="ignore"):
+            e = (np.einsum("ij,npqj->npqi", V[:3, :3], w) + V[:3, 3]).astype(F)
+            ne = np.einsum("ij,npqj->npqi", V[:3, :3], nrm).astype(F)
+            if cam[31] != 0:   # orthographic: the view axis
+                towards = np.broadcast_to(np.array([0, 0, 1], F), e.shape)
+            else:
+                towards = -e / _norm(e)[..., None]
+            facing = (ne * towards).sum(-1, dtype=F)
+        front = (ok & (facing > 0)).any(axis=(1, 2))
+        back = (ok & (facing < 0)).any(axis=(1, 2))
+        out |= seen[view] & front & back
+    return out

@@ -14,12 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
+from pyopencl import cltypes
 
 from paramlod.core.layouts import CAMERA, LOD_COUNTER, constant
 from paramlod.core.views import MAX_VIEWS
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, SceneError
-from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, initial_patches
+from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, initial_patches, render_tiers  # noqa: F401  (re-exported)
 from paramlod.device.programs import launch
 from paramlod.function.programs import build
 
@@ -43,10 +44,23 @@ class LodSettings:
     # (degrees; kernels/lod/lod.cl line_turns): detail between the samples, as a thin lobe, gets
     # the patches it needs at any screen size. 180: off
     detail_angle: float = 120.0
+    # hybrid anti-aliasing (aa = "hybrid"): the spot check (kernels/lod/spot.cl) sends a patch to
+    # the next tier when at least spot_share of its 189 sub-samples have normals that turn by more
+    # than spot_angle (degrees) from their cell's blended corner normals
+    spot_angle: float = 20.0
+    spot_share: float = 0.05
+    # hybrid: a patch over which the surface turns away from a view (a silhouette edge) goes from
+    # tier 0 to tier 1, so its edge pixels are anti-aliased (kernels/lod/spot.cl grid_silhouette)
+    spot_silhouettes: bool = True
 
     def curve_cos(self) -> np.float32:
         """The kernel's ``curve_cos``: the cosine of ``detail_angle`` (-1 at 180: never below it)."""
         return np.float32(np.cos(np.radians(self.detail_angle)))
+
+    def spot(self) -> tuple[np.float32, np.uint32]:
+        """The kernel's ``spot_cos`` and ``spot_min`` (at least one sub-sample)."""
+        return (np.float32(np.cos(np.radians(self.spot_angle))),
+                np.uint32(max(1, int(np.ceil(self.spot_share * SPOT_SUBS)))))
 
     def validate(self):
         tu, tv = self.threshold
@@ -64,6 +78,14 @@ class LodSettings:
         if isinstance(self.detail_angle, bool) or not isinstance(self.detail_angle, (int, float, np.floating)) \
                 or not 0 < self.detail_angle <= 180:
             raise SceneError(f"lod detail_angle must be in (0, 180] degrees (180: off), got {self.detail_angle!r}")
+        if isinstance(self.spot_angle, bool) or not isinstance(self.spot_angle, (int, float, np.floating)) \
+                or not 0 < self.spot_angle < 180:
+            raise SceneError(f"lod spot_angle must be in (0, 180) degrees, got {self.spot_angle!r}")
+        if not isinstance(self.spot_silhouettes, (bool, np.bool_)):
+            raise SceneError(f"lod spot_silhouettes must be true or false, got {self.spot_silhouettes!r}")
+        if isinstance(self.spot_share, bool) or not isinstance(self.spot_share, (int, float, np.floating)) \
+                or not 0 < self.spot_share <= 1:
+            raise SceneError(f"lod spot_share must be a share in (0, 1], got {self.spot_share!r}")
         for name in ("max_patches", "patch_budget"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 1 << 31:
@@ -90,8 +112,10 @@ class _Buffer:
 
 # the per-step counter record (paramlod.core.layouts.LOD_COUNTER; LOD_* in the kernels' prelude)
 LOD_COUNTERS = LOD_COUNTER.length
-C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED, C_BACKFACE = (
-    LOD_COUNTER.offset(f) for f in ("children", "split", "culled", "rendered", "forced", "backface"))
+C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED, C_BACKFACE, C_PROMOTED, C_TIER1, C_TIER2 = (
+    LOD_COUNTER.offset(f) for f in ("children", "split", "culled", "rendered", "forced", "backface", "promoted",
+                                    "tier1", "tier2"))
+SPOT_SUBS = 189   # kernels/lod/spot.cl: 7 x 3 cells, 9 sub-samples each
 LOD_RENDER_TOTAL = LOD_COUNTER.constant("LOD_RENDER_TOTAL")   # counters[0, 1]: the render list's length
 LOD_LOCAL = constant("LOD_LOCAL")   # work-items measuring one patch together (kernels/lod/lod.cl)
 # views one work-group projects at once (local memory: 89 x 9 bytes a view)
@@ -151,7 +175,8 @@ class LodStage:
         # work-groups of LOD_LOCAL per step (they stride over the patches): enough to fill the device
         self.max_groups = dev.device.max_compute_units * (64 if dev.is_gpu else 16)
 
-    def run(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1):
+    def run(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1,
+            tiers=None):
         """Returns (render buffer, render patch count, per-step stats list, ms). ``cam_buf`` holds
         ``n_views`` camera records one after another (``SceneBuffers.upload``'s "cam", "n_views").
 
@@ -160,14 +185,15 @@ class LodStage:
         """
         t0 = time.perf_counter()
         while True:
-            self.enqueue(inst, domains, cam_buf, settings, t_div, n_views)
+            self.enqueue(inst, domains, cam_buf, settings, t_div, n_views, tiers)
             self.read_counters()
             if not self.grow(settings):
                 break
         n_render, steps = self.result()
         return self.render.buf, n_render, steps, (time.perf_counter() - t0) * 1e3
 
-    def enqueue(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1):
+    def enqueue(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1,
+                tiers=None):
         """Enqueue the whole stage without waiting: the render list lands in ``self.render.buf``
         and its length in ``self.counters[LOD_RENDER_TOTAL]`` on the device, for a renderer that
         reads the count there. Then ``read_counters`` (waits), ``grow`` (True: enqueue the frame
@@ -177,7 +203,12 @@ class LodStage:
         Only the steps the previous stage needed plus one are enqueued (a view changes little
         between frames, and each step is a launch of Python and device time); if the last of them
         still splits patches, ``grow`` asks for the stage again with all ``max_steps`` steps. Only
-        step ``max_steps`` forces its patches out, so nothing is rendered too coarse meanwhile."""
+        step ``max_steps`` forces its patches out, so nothing is rendered too coarse meanwhile.
+
+        ``tiers``: hybrid anti-aliasing, tiers 1 and 2's (threshold divisor, spot-check scale)
+        (tier 0's divisor is ``t_div``): a patch about to be rendered whose spot check finds
+        sub-pixel detail is measured again at the next tier (``tier_values``); each render patch
+        carries its tier in ``flags >> TIER_SHIFT``."""
         settings.validate()
         _check_views(n_views, cam_buf)
         q = cl_device().queue
@@ -194,7 +225,9 @@ class LodStage:
             b.ensure(n_init)
         max_steps = self._max_steps = settings.max_steps
         tu, tv = (np.float32(t / t_div) for t in settings.threshold)
-        self._depth_key = (float(tu), float(tv), max_steps)
+        max_tier, tier_t, tier_scale = tier_values(settings, tiers)
+        spot_cos, spot_min = settings.spot()
+        self._depth_key = (float(tu), float(tv), max_steps, tuple(tier_t))
         depth = self._depth.get(self._depth_key)
         steps_n = self._steps_n = max_steps if depth is None else min(max_steps, depth + 1)
         cap = min(b.capacity for b in self.bufs)
@@ -202,7 +235,8 @@ class LodStage:
         backface, widen = np.uint32(bool(settings.backface_cull)), np.float32(settings.backface_widen)
         curve_cos = settings.curve_cos()
         bound = (*inst, cam_buf, int(n_views), float(tu), float(tv), max_steps, cap, int(backface), float(widen),
-                 float(curve_cos),
+                 float(curve_cos), max_tier, tuple(tier_t), tuple(tier_scale), float(spot_cos), int(spot_min),
+                 bool(settings.spot_silhouettes),
                  *(b.buf for b in (self.init, *self.bufs, self.render, self.render_views)))
         layout, kernels = self._kernels(n_views)
         if bound != self._bound.get(layout):
@@ -211,7 +245,9 @@ class LodStage:
                 k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf, self.render_views.buf,
                            np.uint32(self.render.capacity), self.counters, *inst, cam_buf,
                            np.uint32(n_views), tu, tv,
-                           np.uint32(step), np.uint32(step == max_steps), backface, widen, curve_cos)
+                           np.uint32(step), np.uint32(step == max_steps), backface, widen, curve_cos,
+                           np.uint32(max_tier), cltypes.make_float4(*tier_t), cltypes.make_float2(*tier_scale),
+                           spot_cos, spot_min, np.uint32(bool(settings.spot_silhouettes)))
             self._bound[layout] = bound
         if self._start_n != n_init:
             start = np.zeros((16, LOD_COUNTERS), np.uint32)
@@ -275,7 +311,9 @@ class LodStage:
         for step in range(1, self._max_steps + 1):   # steps not enqueued had no input: zeros
             c = counts[step]
             steps.append({"step": step, "in": n_in, "split": int(c[C_SPLIT]), "culled": int(c[C_CULLED]),
-                          "out": int(c[C_RENDERED]), "forced": int(c[C_FORCED]), "backface": int(c[C_BACKFACE])})
+                          "out": int(c[C_RENDERED]), "forced": int(c[C_FORCED]), "backface": int(c[C_BACKFACE]),
+                          "promoted": int(c[C_PROMOTED]),
+                          "tiers": [int(c[C_RENDERED] - c[C_TIER1] - c[C_TIER2]), int(c[C_TIER1]), int(c[C_TIER2])]})
             n_in = int(c[C_CHILDREN])
         return int(counts[0, LOD_RENDER_TOTAL]), steps
 
@@ -305,6 +343,23 @@ class LodStage:
         if n:
             cl.enqueue_copy(cl_device().queue, out, self.render_views.buf)
         return out
+
+
+def tier_values(settings: LodSettings, tiers=None) -> tuple[int, np.ndarray, np.ndarray]:
+    """The LOD kernel's (max_tier, tier_t, tier_scale) for hybrid ``tiers``: tiers 1 and 2's
+    (threshold divisor, spot-check scale), as ``paramlod.renderers.aa.tier_divisors`` gives them
+    (None: no hybrid). Tiers 1 and 2's thresholds (t_u, t_v each) and scales, float32 as the kernel
+    takes them (the twin uses the same values)."""
+    if tiers is None:
+        return 0, np.zeros(4, np.float32), np.ones(2, np.float32)
+    try:
+        (d1, s1), (d2, s2) = ((float(d), float(s)) for d, s in tiers)
+    except (TypeError, ValueError):
+        raise SceneError(f"hybrid tiers must be ((divisor, scale), (divisor, scale)), got {tiers!r}") from None
+    if not (1 <= d1 <= d2 and 1 <= s1 <= s2):
+        raise SceneError(f"hybrid tier divisors and scales must grow from 1, got {tiers!r}")
+    tu, tv = settings.threshold
+    return 2, np.array([tu / d1, tv / d1, tu / d2, tv / d2], np.float32), np.array([s1, s2], np.float32)
 
 
 def _check_views(n_views, cam_buf) -> None:

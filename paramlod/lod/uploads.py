@@ -67,7 +67,7 @@ class SceneBuffers:
     def __init__(self, light):
         self.light = light            # the shading record (paramlod.renderers.shading.LIGHT)
         self._key, self._dev = None, None
-        self._cam_buf = self._cam_host = None
+        self._cams: dict = {}   # slot -> (device buffer, host records, copy event)
 
     def upload(self, scene, camera) -> dict:
         """{"inst": (floats, uints, params), "materials", "light", "domains" (host), "cam" (the
@@ -84,12 +84,17 @@ class SceneBuffers:
                 "domains": inst_f[:, 28:32],
             }
             self._key = key
-        views = as_views(camera)
-        records = views.records()
-        if self._cam_buf is None or self._cam_buf.size < records.nbytes:
-            self._cam_buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, records.nbytes)
+        return dict(self._dev, cam=self.camera(camera), n_views=len(as_views(camera)))
+
+    def camera(self, camera, slot: int = 0) -> cl.Buffer:
+        """The device copy of ``camera``'s records (a Camera or a Views) in buffer ``slot`` (0: the
+        frame's; others: the same views at another target size, as a hybrid tier draws them)."""
+        records = as_views(camera).records()
+        buf = self._cams.get(slot, (None,))[0]
+        if buf is None or buf.size < records.nbytes:
+            buf = cl.Buffer(cl_device().context, cl.mem_flags.READ_ONLY, records.nbytes)
         # not waited for: every frame ends with a wait, so the host copy is free to change then
         # the event is kept with the host copy: a dropped event of a non-blocking copy makes
         # pyopencl wait for it (measured 585 ms behind a running kernel)
-        self._cam_host = (records, cl.enqueue_copy(q, self._cam_buf, records, is_blocking=False))
-        return dict(self._dev, cam=self._cam_buf, n_views=len(views))
+        self._cams[slot] = (buf, records, cl.enqueue_copy(cl_device().queue, buf, records, is_blocking=False))
+        return buf

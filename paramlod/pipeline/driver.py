@@ -110,11 +110,11 @@ class Pipeline:
         ss = p.ss
         layers = len(camera) if isinstance(camera, Views) else 1
         frame_keys = st.keys(camera.size, ss, layers)
-        if ss > 1:
-            target = st.subsample_keys(camera.size, ss, layers)
-            cam = camera.with_size((camera.width * ss, camera.height * ss))
-        else:
-            target, cam = frame_keys, camera
+        # the key buffers drawn into, coarsest first: one, or a hybrid pass's one per tier (its
+        # renderers are given the frame's camera and scale each tier's samples themselves)
+        tiers = p.tiers or (ss,)
+        targets = [frame_keys if t == 1 else st.subsample_keys(camera.size, t, layers) for t in tiers]
+        cam = camera.with_size((camera.width * ss, camera.height * ss)) if ss > 1 and not p.tiers else camera
         drawn = [(g, st.renderer(g)) for g in p.groups]
         for g, r in drawn:
             r.prepare(st.subscenes[g], cam, settings)
@@ -123,10 +123,18 @@ class Pipeline:
         host = 0.0   # Python time spent enqueueing (the rest of the frame is waiting)
         while True:
             t1 = time.perf_counter()
-            target.clear()
-            for g, r in drawn:
-                r.enqueue(target, settings)
-            downsampled = st.downsample(ss).enqueue(target, frame_keys) if ss > 1 else None
+            targets[0].clear()
+            for k, target in enumerate(targets):
+                if k:   # a finer tier starts from the coarser tier's samples
+                    st.upsample(tiers[k] // tiers[k - 1]).enqueue(targets[k - 1], target)
+                for g, r in drawn:
+                    if not p.tiers:
+                        r.enqueue(target, settings)
+                    elif getattr(r, "tiered", False):
+                        r.enqueue(target, settings, tier=k)
+                    elif k == 0:
+                        r.enqueue(target, settings)
+            downsampled = st.downsample(ss).enqueue(targets[-1], frame_keys) if ss > 1 else None
             resolved = frame_keys.resolve_on_device(scene.background)
             host += time.perf_counter() - t1
             # the counter copies: into pageable memory NVIDIA's driver waits for them, so they and
@@ -146,6 +154,7 @@ class Pipeline:
             "size": list(camera.size),
             "supersample": ss,
             "samples_per_pixel": ss * ss,
+            **({"aa": "hybrid", "tiers": [t * t for t in tiers]} if p.tiers else {}),
             "pixels_written": counts["pixels_written"],
             "overdraw": stats.get("atomics", 0) / written if written else 0.0,
         })

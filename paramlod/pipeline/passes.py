@@ -9,7 +9,7 @@ from paramlod.device.context import cl_device
 from paramlod.errors import SceneError
 from paramlod.pipeline.plan import plan
 from paramlod.renderers.registry import KINDS
-from paramlod.renderers.targets import Downsample, KeyBuffer
+from paramlod.renderers.targets import Downsample, KeyBuffer, Upsample
 
 MAX_SIDE = 16384   # subsamples per side of a supersampled key buffer
 
@@ -21,12 +21,15 @@ class SceneState:
         self.subscenes: dict = {}      # Group -> its subscene
         self._by_group: dict = {}      # Group -> its renderer state, for the current plan
         self._renderers: dict = {}     # (variant, aa, functions) -> renderer state
-        self._keys: dict = {}          # (w, h, ss, layers) -> KeyBuffer
+        # (w, h, tag, layers) -> KeyBuffer; tag: the frame's keys' ss, or -factor for the keys of
+        # a supersampled target (a hybrid pass has one per tier)
+        self._keys: dict = {}
         self._downsample: dict = {}    # ss -> Downsample
+        self._upsample: dict = {}      # ratio -> Upsample
 
     def update(self, scene, variant, settings):
         """Plan the scene again when it, the frame's variant or the default AA changed."""
-        key = (scene._version, variant, settings.points.supersample, settings.tess.aa)
+        key = (scene._version, variant, settings.points.supersample, settings.points.hybrid, settings.tess.aa)
         if key != self._plan_key:
             self.passes = plan(scene, variant, settings)
             self.subscenes = {g: scene.subscene(**{KINDS[g.spec.kind].scene_field: g.objects})
@@ -66,19 +69,24 @@ class SceneState:
         if max(w, h) > MAX_SIDE:
             raise SceneError(f"points supersample {ss} at {size[0]}x{size[1]} needs {w}x{h} subsamples, more "
                              f"than {MAX_SIDE} a side; use a smaller factor or frame")
-        return self._buffer(w, h, 0, layers)
+        return self._buffer(w, h, -ss, layers)
 
     def downsample(self, ss: int) -> Downsample:
         if ss not in self._downsample:
             self._downsample[ss] = Downsample(ss)
         return self._downsample[ss]
 
-    def _buffer(self, w, h, ss, layers) -> KeyBuffer:
-        key = (w, h, ss, layers)
+    def upsample(self, ratio: int) -> Upsample:
+        if ratio not in self._upsample:
+            self._upsample[ratio] = Upsample(ratio)
+        return self._upsample[ratio]
+
+    def _buffer(self, w, h, tag, layers) -> KeyBuffer:
+        key = (w, h, tag, layers)
         buf = self._keys.get(key)
         if buf is None:
             # free buffers of other sizes first (a resized view keeps only its own)
-            for k in [k for k in self._keys if k[2] == ss and k != key]:
+            for k in [k for k in self._keys if k[2] == tag and k != key]:
                 self._keys.pop(k)
             limit = cl_device().device.max_mem_alloc_size
             if w * h * layers * 8 > limit:
@@ -86,5 +94,5 @@ class SceneState:
                 raise SceneError(f"key buffers of {w}x{h} keys{views} need {w * h * layers * 8 / 2**20:.0f} MiB each, "
                                  f"more than this device allocates at once ({limit / 2**20:.0f} MiB); use fewer views, "
                                  "a smaller frame or less supersampling")
-            buf = self._keys[key] = KeyBuffer(w, h, max(ss, 1), layers)
+            buf = self._keys[key] = KeyBuffer(w, h, max(tag, 1), layers)
         return buf

@@ -3,13 +3,18 @@ by its registered renderer, and the groups placed in passes (targets), coarsest 
 
 A "keys" pass is one set of 64-bit key buffers (``ss`` x ``ss`` subsamples per pixel) that every
 key renderer of the pass draws into; a "gl" pass is one renderer's own OpenGL targets. Surfels
-join the pass of the direct point variant (else one of ``settings.points.supersample``)."""
+join the pass of the direct point variant (else one of ``settings.points.supersample``).
+
+A hybrid keys pass (``aa = "hybrid"``) has ``tiers``: the subsamples per pixel side of each tier's
+key buffers (POINT_TIERS: 1, 2, 4), drawn coarsest first, each finer one starting from a copy of
+the coarser; its renderers draw each patch in the tier the LOD stage gave it, the others (surfels,
+meshes) in tier 0."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from paramlod.errors import SceneError
-from paramlod.renderers.aa import supersampling_only
+from paramlod.renderers.aa import POINT_TIERS, parse_aa, supersampling_only
 from paramlod.renderers.registry import KINDS, RENDERERS, RendererSpec, renderer
 
 
@@ -23,8 +28,9 @@ class Group:
 @dataclass
 class Pass:
     target: str          # "keys" or "gl"
-    ss: int              # subsamples per pixel side of a keys pass; 1 for gl
+    ss: int              # subsamples per pixel side of a keys pass (its finest tier's); 1 for gl
     groups: list
+    tiers: tuple = ()    # a hybrid keys pass: each tier's subsamples per pixel side, coarsest first
 
 
 def check_variant(variant) -> None:
@@ -46,7 +52,7 @@ def plan(scene, variant, settings) -> list[Pass]:
             v = getattr(obj, "variant", None) or kind.variant_for(variant)
             spec = renderer(v, kind.name)
             groups.setdefault((spec.variant, getattr(obj, "aa", None)), []).append(obj)
-    keys: dict[int, list] = {}
+    keys: dict[tuple, list] = {}   # (ss, hybrid) -> the groups of that keys pass
     passes = []
     surfels = []
     for (v, aa), objs in groups.items():
@@ -60,16 +66,21 @@ def plan(scene, variant, settings) -> list[Pass]:
             continue
         keys.setdefault(_key_ss(group, settings), []).append(group)
     if surfels:
-        direct = [ss for ss, gs in keys.items() if any(g.spec.variant == "points" for g in gs)]
-        keys.setdefault(direct[0] if direct else settings.points.supersample, []).extend(surfels)
-    passes += [Pass("keys", ss, gs) for ss, gs in keys.items()]
-    return sorted(passes, key=lambda p: (p.target == "gl", p.ss))
+        direct = [k for k, gs in keys.items() if any(g.spec.variant == "points" for g in gs)]
+        keys.setdefault(direct[0] if direct else (settings.points.supersample, False), []).extend(surfels)
+    tiers = tuple(t.ss for t in POINT_TIERS)
+    passes += [Pass("keys", ss, gs, tiers if hybrid else ()) for (ss, hybrid), gs in keys.items()]
+    return sorted(passes, key=lambda p: (p.target == "gl", p.ss, bool(p.tiers)))
 
 
-def _key_ss(group: Group, settings) -> int:
+def _key_ss(group: Group, settings) -> tuple[int, bool]:
+    """(subsamples per pixel side, hybrid) of the keys pass that draws ``group``."""
     if group.spec.variant == "points-ssaa":
         if group.aa:
             raise SceneError(f"points-ssaa takes no per-object aa ({group.aa!r}): its subsamples are "
                              "settings.ssaa.ss ([ssaa] ss in a scene file)")
-        return 1
-    return settings.points.supersample if group.aa is None else supersampling_only(group.aa)
+        return 1, False
+    hybrid = settings.points.hybrid if group.aa is None else parse_aa(group.aa).hybrid
+    if hybrid:   # a renderer without tiers draws into the hybrid pass's tier 0
+        return POINT_TIERS[-1].ss, True
+    return settings.points.supersample if group.aa is None else supersampling_only(group.aa), False

@@ -35,7 +35,8 @@ class RenderSettings:
         if variant == "points-ssaa":
             local_framebuffer_ss(aa)
         self.points.supersample = aa.ss
+        self.points.hybrid = aa.hybrid
         if aa.ss in (2, 3):
             self.ssaa.ss = aa.ss
-        self.aa = aa if (aa.ss, aa.msaa) != (1, 1) or variant == "points-ssaa" else None
+        self.aa = aa if (aa.ss, aa.msaa) != (1, 1) or aa.hybrid or variant == "points-ssaa" else None
         return aa

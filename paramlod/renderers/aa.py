@@ -1,7 +1,12 @@
 """Anti-aliasing modes, one grammar for every renderer: ``noAA``; ``2xMS``/``4xMS``/``8xMS`` (aliases
 ``msaa2`` ...); ``4xSS``/``9xSS``/``16xSS`` (2x2, 3x3, 4x4 supersampling; aliases ``ssaa2x2`` ...);
 and combinations such as ``4xSS+8xMS`` (32 depth samples per pixel). The tess variant takes a mode
-whole; the points variant takes its supersampling (multisampling is an error there)."""
+whole; the points variant takes its supersampling (multisampling is an error there).
+
+``hybrid`` (thesis section 5.5.7): the LOD stage's spot check sends each patch with sub-pixel
+detail to a finer tier, and the tiers are drawn coarse to fine, each finer target starting from a
+per-sample copy of the coarser one: for tess noAA -> 8xMS -> 4xSS+8xMS (``TESS_TIERS``), for
+points 1x -> 4xSS -> 16xSS key buffers (``POINT_TIERS``)."""
 from __future__ import annotations
 
 import math
@@ -20,6 +25,7 @@ class AAMode:
 
     ss: int = 1
     msaa: int = 1
+    hybrid: bool = False   # the tiers of hybrid_tiers, chosen per patch (ss, msaa unused)
 
     @property
     def samples_per_pixel(self) -> int:
@@ -33,6 +39,8 @@ class AAMode:
 
     @property
     def name(self) -> str:
+        if self.hybrid:
+            return "hybrid"
         parts = []
         if self.ss > 1:
             parts.append(f"{self.ss * self.ss}xSS")
@@ -51,6 +59,8 @@ def parse_aa(mode) -> AAMode:
     text = mode.strip()
     if text.lower() in ("noaa", "none", "off"):
         return AAMode()
+    if text.lower() == "hybrid":
+        return AAMode(hybrid=True)
     ss, ms = 1, 1
     for part in (p.strip().lower() for p in text.split("+")):
         m_ms = re.fullmatch(r"(\d+)x?ms(?:aa)?", part)
@@ -89,6 +99,30 @@ def lod_divisor(mode, max_samples: int | None = None, msaa_lod: bool = False) ->
     return aa.divisor(msaa_lod)
 
 
+# the hybrid tiers, coarsest first: the thesis's three for tess, supersampled key buffers for points
+TESS_TIERS = (AAMode(), AAMode(1, 8), AAMode(2, 8))
+POINT_TIERS = (AAMode(), AAMode(2), AAMode(4))
+
+
+def hybrid_tiers(variant: str, max_samples: int | None = None) -> tuple[AAMode, ...]:
+    """The tiers of ``aa = "hybrid"`` for ``variant`` ("tess": multisampling capped to
+    ``max_samples``; the point variants: supersampling only)."""
+    if variant != "tess":
+        return POINT_TIERS
+    if max_samples is None:
+        return TESS_TIERS
+    return tuple(AAMode(t.ss, cap_samples(t.msaa, max_samples)) for t in TESS_TIERS)
+
+
+def tier_divisors(tiers, msaa_lod: bool = False) -> tuple[tuple[float, float], ...]:
+    """Tiers 1 and 2's (LOD threshold divisor, spot-check scale): the divisor as the uniform mode of
+    the tier would divide (``AAMode.divisor``: its supersampling, with ``msaa_lod`` also sqrt(msaa);
+    2 and 4 for points), the scale its samples per pixel side, sqrt of its samples per pixel (the
+    thesis's guideline; sqrt(8) and sqrt(32) for tess): the spot check looks for detail smaller than
+    the tier's samples can show."""
+    return tuple((t.divisor(msaa_lod), t.divisor(msaa_lod=True)) for t in tiers[1:])
+
+
 def cap_samples(requested: int, max_samples: int) -> int:
     n = requested
     while n > 1 and n > max_samples:
@@ -102,8 +136,8 @@ def supersampling_only(mode) -> int:
     aa = parse_aa(mode)
     if aa.msaa > 1:
         raise SceneError(f"anti-aliasing {mode!r}: the points variant supersamples only (4xSS, 9xSS, "
-                         f"16xSS); multisampling is a mode of the tess variant")
-    return aa.ss
+                         f"16xSS) or draws \"hybrid\"; multisampling is a mode of the tess variant")
+    return POINT_TIERS[-1].ss if aa.hybrid else aa.ss
 
 
 # points-ssaa's local framebuffer holds 2x2 or 3x3 subsamples (SsaaSettings.ss)

@@ -14,6 +14,11 @@ the prelude and tess_common.glsl for its counter buffer): the hardware multisamp
 colour, box-averaged over the SSAA block (straight alpha = covered fraction); depth, normal and id of
 the nearest covered sample of the block, +inf / 0 / 0 where none is.
 
+Hybrid anti-aliasing (the tess renderer's ``aa = "hybrid"``): each tier draws into its own
+targets, coarse to fine; a finer tier's targets start from a per-sample copy of a coarser tier's
+(``GLTargets.carry``, kernels/tess/tess_carry_fragment.glsl), whose depth buffer is then a depth
+texture (``depth_texture``) so that the copy can read it.
+
 Multi-view frames (``LayeredGLTargets``, the tess renderer's ``draw_views``): the same targets as
 2D texture arrays with one layer per view (multisampled arrays for MSAA), drawn in one pass whose
 last geometry stage picks the layer; the resolve and the readback then run layer by layer into the
@@ -65,6 +70,22 @@ def effective_aa(ctx, mode) -> tuple[AAMode, AAMode, list[str]]:
     return req, eff, notes
 
 
+def _full_screen_program(ctx, defs: dict, common: list[str], fragment: str, what: str):
+    """A program of the full-screen triangle (tess_resolve_vertex.glsl) and ``fragment``, each
+    stage "#version", the ``defs``, ``common`` and its file; a DeviceError naming ``what`` if it
+    does not compile."""
+    head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in defs.items())
+    stages = {name: head + "\n".join([*common, kernels.source(f"tess/{part}.glsl")])
+              for name, part in (("vertex_shader", "tess_resolve_vertex"), ("fragment_shader", fragment))}
+    try:
+        return ctx.program(**stages)
+    except moderngl.Error as exc:
+        log = str(exc)
+        stage = next((k for k in stages if k in log), "fragment_shader")
+        raise DeviceError(f"the OpenGL {what} shader does not compile on {ctx.info.get('GL_RENDERER')}:\n"
+                          f"{context_lines(stages[stage], log, GLSL_LINE)}\ncompiler said:\n{log[-2000:]}") from None
+
+
 def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
     """The resolve program for ``ss`` x ``ss`` supersampling and ``samples`` multisamples (of one
     layer ``u_layer`` of texture arrays when ``layered``), cached."""
@@ -77,21 +98,23 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
             defs["PL_MS"] = 1
         if layered:
             defs["PL_LAYERED"] = 1
-        head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in defs.items())
         # the very text the tess renderer compiled before the move (tess_common.glsl declares the
         # counter buffer the resolve reports the device's sample count into)
         common = [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
-        stages = {name: head + "\n".join([*common, kernels.source(f"tess/tess_resolve_{part}.glsl")])
-                  for name, part in (("vertex_shader", "vertex"), ("fragment_shader", "fragment"))}
-        try:
-            prog = ctx.program(**stages)
-        except moderngl.Error as exc:
-            log = str(exc)
-            stage = next((k for k in stages if k in log), "fragment_shader")
-            raise DeviceError(f"the OpenGL resolve shader does not compile on {ctx.info.get('GL_RENDERER')}:\n"
-                              f"{context_lines(stages[stage], log, GLSL_LINE)}\ncompiler said:\n{log[-2000:]}") from None
-        programs[key] = prog
+        prog = programs[key] = _full_screen_program(ctx, defs, common, "tess_resolve_fragment", "resolve")
     return prog
+
+
+def carry_vao(ctx, ratio: int, coarse_samples: int):
+    """The carry pass (``GLTargets.carry``) from targets of ``coarse_samples`` multisamples into
+    targets of ``ratio`` x ``ratio`` times their pixels: its vertex array (no buffers), cached."""
+    vaos = gl_cache(ctx).setdefault("gl_carry_vaos", {})
+    key = (ratio, coarse_samples)
+    vao = vaos.get(key)
+    if vao is None:
+        defs = {"PL_RATIO": ratio, **({"PL_MS": 1} if coarse_samples > 1 else {})}
+        vao = vaos[key] = ctx.vertex_array(_full_screen_program(ctx, defs, [], "tess_carry_fragment", "carry"), [])
+    return vao
 
 
 class _Outputs:
@@ -146,13 +169,16 @@ class _Outputs:
 
 class GLTargets(_Outputs):
     """Render targets at the supersampled size (multisampled when ``samples`` > 1) and the
-    single-sampled output targets at ``size``; ``what`` names the renderer in errors."""
+    single-sampled output targets at ``size``; ``what`` names the renderer in errors.
+    ``depth_texture``: the depth buffer is a depth texture, so that ``carry`` can read it (a
+    renderbuffer otherwise)."""
 
     layers = 0   # not layered (LayeredGLTargets)
 
-    def __init__(self, ctx, size: tuple[int, int], ss: int, samples: int, what: str = "OpenGL"):
+    def __init__(self, ctx, size: tuple[int, int], ss: int, samples: int, what: str = "OpenGL",
+                 depth_texture: bool = False):
         self.ctx = ctx
-        self.size, self.ss, self.samples = tuple(size), ss, samples
+        self.size, self.ss, self.samples, self.depth_texture = tuple(size), ss, samples, depth_texture
         w, h = size
         big = (w * ss, h * ss)
         ms = samples if samples > 1 else 0
@@ -162,7 +188,12 @@ class GLTargets(_Outputs):
             self.depth = ctx.texture(big, 1, dtype="f4", samples=ms)
             self.normal = ctx.texture(big, 4, dtype="f2", samples=ms)
             self.object = ctx.texture(big, 1, dtype="u4", samples=ms)
-            self.zbuf = ctx.depth_renderbuffer(big, samples=ms)
+            if depth_texture:
+                self.zbuf = ctx.depth_texture(big, samples=ms)
+                if not ms:
+                    self.zbuf.compare_func = ""   # read as values (texelFetch), not compared
+            else:
+                self.zbuf = ctx.depth_renderbuffer(big, samples=ms)
             self.fbo = ctx.framebuffer([self.color, self.depth, self.normal, self.object], self.zbuf)
             if ms:
                 self.color_ms_fbo = ctx.framebuffer([self.color])
@@ -172,6 +203,8 @@ class GLTargets(_Outputs):
                 self.color_resolved = self.color
             # integer textures must be sampled with NEAREST (else incomplete); multisample ones have no filter
             single = [self.color_resolved] + ([] if ms else [self.depth, self.normal, self.object])
+            if depth_texture and not ms:
+                single.append(self.zbuf)
             for t in single:
                 t.filter = (ctx.NEAREST, ctx.NEAREST)
             self._outputs(resolve_program(ctx, ss, samples))
@@ -184,6 +217,31 @@ class GLTargets(_Outputs):
         self.fbo.color_mask = CLEAR_MASK
         self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         self.fbo.color_mask = DRAW_MASK
+
+    def carry(self, coarse: GLTargets):
+        """Bind these targets for drawing, cleared, and start them from a per-sample copy of
+        ``coarse``, a coarser hybrid tier's targets of the same size made with ``depth_texture``
+        (kernels/tess/tess_carry_fragment.glsl): each sample takes colour, linear depth, normal,
+        object id and hardware depth from the sample of the same index of the coarse pixel it
+        lies in, so what is drawn next is depth-tested against the coarse tier per sample."""
+        ratio, rest = divmod(self.ss, coarse.ss)
+        if rest or coarse.size != self.size or not coarse.depth_texture or coarse.samples > max(self.samples, 1):
+            raise ValueError(f"cannot carry {coarse.ss}x{coarse.ss} SS, {coarse.samples} samples "
+                             f"(depth texture: {coarse.depth_texture}) at {coarse.size} into {self.ss}x{self.ss} SS, "
+                             f"{self.samples} samples at {self.size}")
+        ctx = self.ctx
+        self.begin()
+        vao = carry_vao(ctx, ratio, coarse.samples)
+        for unit, (name, tex) in enumerate((("u_color", coarse.color), ("u_depth", coarse.depth),
+                                            ("u_normal", coarse.normal), ("u_object", coarse.object),
+                                            ("u_zbuf", coarse.zbuf))):
+            tex.use(location=unit)
+            set_uniform(vao.program, name, unit)
+        # GL writes depth only with the test on; every covered coarse sample passes it, being
+        # nearer than the cleared 1 (its fragment passed the same test against it)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        vao.render(mode=moderngl.TRIANGLES, vertices=3)
 
     def resolve(self) -> int:
         """Resolve what was drawn into the output targets (waits for the device); returns the
@@ -279,6 +337,8 @@ class LayeredGLTargets(_Outputs):
     a depth texture array of the renderbuffer's format), resolved and read back one layer at a
     time into single-layer output targets. Drawn through the layered framebuffer: a geometry
     stage picks each primitive's layer (tess with views_per_pass > 1, meshlets-gl)."""
+
+    depth_texture = False   # hybrid anti-aliasing's carry (GLTargets.carry) draws one view at a time
 
     def __init__(self, ctx, size: tuple[int, int], ss: int, samples: int, layers: int, what: str = "OpenGL"):
         self.ctx = ctx
@@ -398,17 +458,18 @@ class LayeredGLTargets(_Outputs):
                 items.clear()
 
 
-def targets_for(current, ctx, size, ss: int, samples: int, what: str = "OpenGL", layers: int = 0):
-    """``current`` when it fits (size, ss, samples, layers), else new targets (``current``
-    released): GLTargets, or LayeredGLTargets of ``layers`` layers when ``layers`` > 0."""
-    if current is not None and (current.size, current.ss, current.samples, current.layers) == (
-            tuple(size), ss, samples, layers):
+def targets_for(current, ctx, size, ss: int, samples: int, what: str = "OpenGL", layers: int = 0,
+                depth_texture: bool = False):
+    """``current`` when it fits (size, ss, samples, layers, depth_texture), else new targets
+    (``current`` released): GLTargets, or LayeredGLTargets of ``layers`` layers when ``layers`` > 0."""
+    if current is not None and (current.size, current.ss, current.samples, current.layers, current.depth_texture) == (
+            tuple(size), ss, samples, layers, depth_texture):
         return current
     if current is not None:
         current.release()
     if layers:
         return LayeredGLTargets(ctx, tuple(size), ss, samples, layers, what)
-    return GLTargets(ctx, tuple(size), ss, samples, what)
+    return GLTargets(ctx, tuple(size), ss, samples, what, depth_texture)
 
 
 def gl_matrix(m) -> np.ndarray:

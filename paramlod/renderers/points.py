@@ -11,6 +11,7 @@ import pyopencl as cl
 from paramlod.device.context import cl_device
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
 from paramlod.lod.uploads import SceneBuffers
+from paramlod.renderers.aa import POINT_TIERS, tier_divisors
 from paramlod.renderers.occlusion import OcclusionCuller
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, side_counts  # noqa: F401  (re-exported)
@@ -54,6 +55,9 @@ class AutoOcclusion:
             self.on = self.samples[True] < (1 - AUTO_MIN_SAVED) * self.samples[False]
 
 
+ALL_TIERS = np.uint32(0xFFFFFFFF)   # points.cl: every patch, whatever its hybrid tier
+
+
 class _Launch:
     """The schedule and sample kernels of one list drawn in a frame, with the arguments bound."""
 
@@ -70,9 +74,9 @@ class DirectPointRenderer:
             defines["PL_GROUP_COUNTERS"] = 1
         # occlusion.cl shares the program: the function code is compiled once
         self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions, defines)
-        # own kernel objects per list drawn in a frame (all patches, or the two occlusion phases):
-        # arguments are set only when they change (see enqueue)
-        self._launches = [_Launch(self.program) for _ in range(2)]
+        # own kernel objects per list drawn in a frame (all patches, the two occlusion phases, the
+        # hybrid tiers): arguments are set only when they change (see enqueue)
+        self._launches: dict = {}
         self.record = record
         dev = cl_device()
         # COUNTERS, then the schedule's counter (kernels/points.cl, SCHED_AT)
@@ -86,11 +90,13 @@ class DirectPointRenderer:
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
                 light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None,
-                phase: int = 0):
+                phase: int = 0, tier: int | None = None, scale: int = 1):
         """Enqueue the render of the ``count_buf[count_at]`` (read on the device, at most
         ``capacity``) patches of ``patches_buf`` without waiting; ``counts()`` reads the counters.
-        ``phase`` 1: a second list of the same frame (occlusion culling's phase 2), whose counts
-        and device time add to the first's.
+        ``phase`` > 0: a later list of the same frame (occlusion culling's phase 2, a finer hybrid
+        tier), whose counts and device time add to the first's. ``tier``: only the patches of that
+        hybrid tier, drawn into ``keys`` ``scale`` times the measured pixels (``cam_buf``: its
+        camera).
         ``n_views``: camera records in ``cam_buf``, each sample is written into layer v of
         ``keys`` for every view v that sees its patch (``view_masks``: a uint64 per patch, bit v
         for view v, as LodStage.render_views; needed with several views) and whose frustum holds
@@ -111,19 +117,23 @@ class DirectPointRenderer:
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
         else:   # only the schedule's counter
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * len(COUNTERS), 8)
-        sampling = (settings.factor(), settings.measure(boundary=True))   # watertight on patch edges
-        args = (patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), self._order,
+        sampling = (settings.factor(scale), settings.measure(boundary=True))   # watertight on patch edges
+        args = (patches_buf, self._order,
                 *inst, materials_buf, cam_buf, np.uint32(n_views), view_masks, light_buf, *sampling, np.float32(settings.widen),
                 np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)), keys.color, keys.aux,
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time
-        k = self._launches[phase]
-        if args != k.bound:
+        k = self._launches.get((phase, tier))
+        if k is None:
+            k = self._launches[(phase, tier)] = _Launch(self.program)
+        bound = (count_buf, count_at, capacity, tier, args)
+        if bound != k.bound:
             k.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), *sampling,
-                                np.uint32(settings.max_side), self._order, self.counters)
+                                np.uint32(settings.max_side), ALL_TIERS if tier is None else np.uint32(tier),
+                                self._order, self.counters)
             k.kernel.set_args(*args)
-            k.bound = args
+            k.bound = bound
         items = min(-(-capacity // LOCAL_SIZE), self.max_groups) * LOCAL_SIZE
         events = (launch(q, k.schedule, (items,), (LOCAL_SIZE,)),
                   launch(q, k.kernel, (self.max_groups * LOCAL_SIZE,), (LOCAL_SIZE,)))
@@ -155,7 +165,14 @@ class DirectPointRenderer:
 
 class DirectPoints:
     """Per-scene state of the "points" variant: the scene's device buffers, its LOD stage and the
-    sampler. The whole frame is enqueued at once; the sampler reads the patch count on the device."""
+    sampler. The whole frame is enqueued at once; the sampler reads the patch count on the device.
+
+    Hybrid anti-aliasing (``tiered``): the driver calls ``enqueue`` once per tier of POINT_TIERS,
+    coarsest first, with that tier's key buffers (1x, 2x, 4x the frame's side, each starting from
+    a per-subsample copy of the coarser one): tier 0 runs the LOD stage with the tiers' divisors,
+    and each tier draws its own patches, sampled for its target's pixels."""
+
+    tiered = True
 
     def __init__(self, functions, record: bool = False):
         self.buffers = SceneBuffers(LIGHT)
@@ -171,8 +188,12 @@ class DirectPoints:
     def prepare(self, scene, camera, settings):
         settings.points.validate()
         self.dev = self.buffers.upload(scene, camera)
+        self.camera = camera
 
-    def enqueue(self, target, settings):
+    def enqueue(self, target, settings, tier: int | None = None):
+        if tier is not None:
+            self._enqueue_tier(target, settings, tier)
+            return
         d = self.dev
         lod, pts = self.lod, self.points
         lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"])
@@ -193,6 +214,19 @@ class DirectPoints:
         pts.enqueue(occ.late, occ.counts_buf, 2, cap, *draw, phase=1)
         occ.swap()
 
+    def _enqueue_tier(self, target, settings, tier: int):
+        d, lod = self.dev, self.lod
+        if tier == 0:
+            lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"],
+                        tiers=tier_divisors(POINT_TIERS))
+            self.culled = self.auto_frame = False   # the tiers are drawn without occlusion culling
+        scale = POINT_TIERS[tier].ss
+        cam = d["cam"] if scale == 1 else self.buffers.camera(self.camera.with_size((target.width, target.height)),
+                                                               slot=tier)
+        self.points.enqueue(lod.render.buf, lod.counters, LOD_RENDER_TOTAL, lod.render.capacity, d["inst"],
+                            d["materials"], cam, d["light"], target, settings.points, n_views=d["n_views"],
+                            view_masks=lod.render_views.buf, phase=tier, tier=tier, scale=scale)
+
     def collect(self):
         self.lod.read_counters(wait=False)
         self.points.read_counts()
@@ -205,6 +239,7 @@ class DirectPoints:
     def stats(self) -> dict:
         n, steps = self.lod.result()
         out = {"render_patches": n, "lod_steps": steps, "forced_patches": sum(s["forced"] for s in steps),
+               "tier_patches": [sum(s["tiers"][t] for s in steps) for t in range(3)],
                **self.points.counts(wait=False),
                "ms": {"lod": self.lod.device_ms(), "render": self.points.device_ms()}}
         if self.culled:   # render: from the first bound to the last sample

@@ -144,3 +144,11 @@ def resolve_image(color_keys: np.ndarray, background_code) -> np.ndarray:
         value = np.where(al == 255, code, encode_srgb8(mixed.astype(np.uint32), thr))
         out[..., c] = np.where(k == CLEAR, np.uint32(bg), value)
     return out
+
+
+def upsample_keys(color: np.ndarray, aux: np.ndarray, ratio: int):
+    """Twin of upsample_keys() in kernels/subsamples.cl: (colour, aux) keys (height, width) ->
+    (height * ratio, width * ratio), each key copied into its ratio x ratio block."""
+    def up(a):
+        return np.repeat(np.repeat(np.asarray(a, np.uint64), ratio, axis=0), ratio, axis=1)
+    return up(color), up(aux)

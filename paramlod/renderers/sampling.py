@@ -16,14 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from paramlod.core.debug_colors import cluster_color, level_color
+from paramlod.core.debug_colors import cluster_color, level_color, tier_color
 from paramlod.core.hashing import hash32
 from paramlod.errors import SceneError
+from paramlod.lod.patches import render_tiers
 
 SAMPLING = ("segment", "extent")
 # the direct variant's colouring (kernels/points/points.cl debug_material): the material, a colour
-# per render patch, a colour per LOD step
-COLOR_BY = ("material", "patch", "level")
+# per render patch, a colour per LOD step, a colour per hybrid tier
+COLOR_BY = ("material", "patch", "level", "tier")
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
@@ -42,7 +43,11 @@ class PointSettings:
     # anti-aliasing of the direct variant: render into keys supersample x the frame's size, then
     # resolve each block (colour averaged over covered subsamples, alpha = coverage); 1 = off
     supersample: int = 1
-    color_by: str = "material"   # the direct variant's debug colouring: "patch" or "level" (LOD step)
+    # aa = "hybrid": patches drawn into 1x, 4xSS or 16xSS key buffers as the LOD stage's spot
+    # check finds sub-pixel detail (paramlod.renderers.aa.POINT_TIERS); supersample is then unused
+    hybrid: bool = False
+    # the direct variant's debug colouring: "patch", "level" (LOD step) or "tier" (hybrid tier)
+    color_by: str = "material"
     # the direct variant's two-phase occlusion culling of render patches (docs/points.md, the
     # same keys with fewer samples; single-view frames only): True always, False never, "auto"
     # while it saves enough samples to pay (paramlod/renderers/points.py AutoOcclusion)
@@ -64,14 +69,17 @@ class PointSettings:
         if self.supersample not in (1, 2, 3, 4) or isinstance(self.supersample, bool):
             raise SceneError(f"points supersample must be 1 (off), 2, 3 or 4 subsamples per pixel side, "
                              f"got {self.supersample!r}")
+        if not isinstance(self.hybrid, (bool, np.bool_)):
+            raise SceneError(f"points hybrid must be true or false, got {self.hybrid!r}")
         if not (isinstance(self.occlusion, bool) or self.occlusion == "auto"):
             raise SceneError(f"points occlusion must be true, false or \"auto\", got {self.occlusion!r}")
         if self.color_by not in COLOR_BY:
             raise SceneError(f"points color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
 
-    def factor(self) -> np.float32:
-        """Samples per measured pixel along each side, as the kernel receives it (float32)."""
-        return np.float32(self.density * self.oversample / (1.0 - self.epsilon))
+    def factor(self, scale: float = 1.0) -> np.float32:
+        """Samples per measured pixel along each side, as the kernel receives it (float32);
+        ``scale``: target pixels per measured pixel (a hybrid tier's supersampling)."""
+        return np.float32(self.density * self.oversample * scale / (1.0 - self.epsilon))
 
     @property
     def use_extent(self) -> bool:
@@ -151,4 +159,6 @@ def patch_debug_materials(render_list: np.ndarray, materials: np.ndarray, color_
         m[:, :3] = cluster_color(key)
     elif color_by == "level":
         m[:, :3] = level_color(render_list["flags"] & np.uint32(15))
+    elif color_by == "tier":
+        m[:, :3] = tier_color(render_tiers(render_list))
     return m

@@ -5,7 +5,9 @@ aux key (depth | octahedral normal | object id). Renderers only ever atom_min in
 multi-view frame (``paramlod.render_views``) has ``layers`` of them one after another: pixel (x, y)
 of view v is key ``v * width * height + y * width + x``, so the resolve and the downsample treat the
 layers as one tall image and never mix two views in one work-group or block.
-``Downsample`` resolves a supersampled KeyBuffer block by block into one of the frame's size.
+``Downsample`` resolves a supersampled KeyBuffer block by block into one of the frame's size;
+``Upsample`` copies each key of a KeyBuffer into every subsample of one ``ratio`` times its side
+(the hybrid tiers' hand-over from a coarser to a finer tier).
 """
 from __future__ import annotations
 
@@ -217,6 +219,30 @@ class Downsample:
                              f"{dst.width}x{dst.height} pixels")
         args = (src.color, src.aux, np.uint32(dst.width), np.uint32(dst.height * dst.layers), *(t.data for t in self.tables),
                 dst.color, dst.aux)
+        if args != self._bound:
+            self.kernel.set_args(*args)
+            self._bound = args
+        n = dst.pixel_count
+        return launch(cl_device().queue, self.kernel, ((n + 255) // 256 * 256,))
+
+
+class Upsample:
+    """Copies each key of a KeyBuffer into its ``ratio`` x ``ratio`` block of one ``ratio`` times its
+    side (kernels/points/subsamples.cl upsample_keys; numpy twin: points_reference.upsample_keys):
+    a finer hybrid tier starts from the coarser tier's samples."""
+
+    def __init__(self, ratio: int):
+        self.ratio = int(ratio)
+        self.kernel = cl.Kernel(build(["common/keys.cl", "points/subsamples.cl"], defines={"PL_RATIO": self.ratio}),
+                                "upsample_keys")
+        self._bound = None
+
+    def enqueue(self, src: KeyBuffer, dst: KeyBuffer):
+        """Enqueue the copy of ``src`` into ``dst`` (returns the kernel's event)."""
+        if (dst.width, dst.height, dst.layers) != (src.width * self.ratio, src.height * self.ratio, src.layers):
+            raise ValueError(f"upsample by {self.ratio}: {src.width}x{src.height} keys do not fill "
+                             f"{dst.width}x{dst.height}")
+        args = (src.color, src.aux, np.uint32(src.width), np.uint32(src.height * src.layers), dst.color, dst.aux)
         if args != self._bound:
             self.kernel.set_args(*args)
             self._bound = args

@@ -12,6 +12,17 @@ combinations such as ``4xSS+8xMS`` (32 depth samples per pixel). A multisample r
 the device supports is capped, with a warning and ``stats["warnings"]``. The LOD thresholds are
 divided by ``lod_divisor(mode)``: the supersampling factor per axis (``msaa_lod`` adds sqrt(MSAA)).
 
+Hybrid anti-aliasing (``aa = "hybrid"``, thesis section 5.5.7, docs/hybrid.md): the LOD stage sends
+each patch with sub-pixel detail or a silhouette to a finer tier (``render_tiers``); the render list is ordered by
+tier and each tier drawn into its own targets (``hybrid_tiers``: noAA, 8xMS, 4xSS+8xMS,
+multisampling capped to the device), coarse to fine, with the thresholds of its tier
+(``tier_divisors``: those of the tier's uniform mode, ``msaa_lod`` included). A finer tier's
+targets start from a per-sample copy of the last tier drawn (``GLTargets.carry``), so its patches
+are depth-tested per sample against the coarser ones, and the finest tier drawn is resolved; tiers
+without patches are skipped (a frame of tier-0 patches only is a noAA frame). One view at a
+time. ``TessSettings.hybrid_targets = "finest"`` draws every tier into the finest one's targets
+instead; ``TessSettings.color_by = "tier"`` shades each patch with its tier's debug colour.
+
 Targets and their resolve: ``paramlod.renderers.gl_targets`` (colour RGBA16F, hardware multisample
 resolve, then a box downsample of the SSAA block; linear view depth R32F, world normal RGBA16F and
 object id R32UI, resolved to the nearest covered sample of the pixel). ``docs/tessellation.md`` has
@@ -50,10 +61,11 @@ from paramlod.device.context import cl_device, gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import FunctionError, SceneError
 from paramlod.function.codegen_glsl import glsl_dispatch_source
-from paramlod.lod.patches import RENDER_DTYPE
+from paramlod.lod.patches import RENDER_DTYPE, render_tiers
 from paramlod.lod.stage import LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import AAMode, lod_divisor, parse_aa  # noqa: F401  (AAMode, lod_divisor re-exported)
+from paramlod.renderers.aa import hybrid_tiers, tier_divisors
 from paramlod.renderers.gl_targets import (GL_MAX_GEOMETRY_SHADER_INVOCATIONS, GLTargets, GrowBuffer, LayeredGLTargets,
                                            effective_aa, gl_limit, gl_matrix, max_samples, resolve_program, targets_for)
 from paramlod.renderers.registry import RendererSpec, register_renderer
@@ -71,6 +83,10 @@ PATCH_FORMAT = vertex_format(RENDER_PATCH, PATCH_ATTRIBUTES)   # "4f 16x 4f 1u 1
 # views per geometry-shader invocation set: GL's guaranteed minimum of MAX_GEOMETRY_SHADER_INVOCATIONS
 MAX_INVOCATIONS = 32
 VIEW_FLOATS = 36   # a PlViews record (kernels/tess/tess_views.glsl, std140): view, proj, near (vec4)
+COLOR_BY = ("material", "tier")   # TessSettings.color_by
+HYBRID_TARGETS = ("tiers", "finest")   # TessSettings.hybrid_targets
+HYBRID_VIEWS = ('anti-aliasing "hybrid" draws one view at a time (its tiers carry one view\'s targets into the '
+                'next); render each camera with render(), or use another mode for render_views')
 
 
 # --- settings -----------------------------------------------------------------------------------
@@ -91,6 +107,16 @@ class TessSettings:
     needs (thesis chapter 2 found 4 best on consumer NVIDIA GPUs). On the H200 a pass per view
     was the fastest in every case measured (1080p, 2, 6 and 48 views): its draw 2.5x to 7x faster
     than the geometry stage's for a sphere, 1.9x to 2.4x for 19,600 glyphs.
+
+    ``color_by``: "material" (each object's colour) or "tier" (a debug view of ``aa = "hybrid"``:
+    each patch shaded with its tier's colour, ``pl_tier_color``: 0 blue, 1 green, 2 red; without
+    hybrid every patch is tier 0).
+
+    ``hybrid_targets`` (``aa = "hybrid"``): "tiers", the thesis's scheme, each tier drawn into
+    targets of its own mode, coarsest first, each finer one started from a per-sample copy of the
+    coarser (``GLTargets.carry``); or "finest", every tier drawn with its own thresholds straight
+    into the finest drawn tier's targets (no copies; the coarser tiers' patches are multisampled
+    too). The tiers then differ only in the patches and levels the LOD gives them.
     """
 
     mode: str = "adaptive"
@@ -103,6 +129,8 @@ class TessSettings:
     overlap: float = 0.005
     msaa_lod: bool = False   # divide the LOD threshold by sqrt(msaa) too (see AAMode.divisor)
     views_per_pass: int = 1
+    color_by: str = "material"
+    hybrid_targets: str = "tiers"
 
     def validate(self):
         if self.mode not in ("adaptive", "fixed"):
@@ -125,6 +153,11 @@ class TessSettings:
         k = self.views_per_pass
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= MAX_INVOCATIONS:
             raise SceneError(f"tess views_per_pass must be a whole number in 1..{MAX_INVOCATIONS}, got {k!r}")
+        if self.color_by not in COLOR_BY:
+            raise SceneError(f"tess color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
+        if self.hybrid_targets not in HYBRID_TARGETS:
+            raise SceneError(f"tess hybrid_targets must be one of {', '.join(HYBRID_TARGETS)}, "
+                             f"got {self.hybrid_targets!r}")
 
 
 # --- shader programs ----------------------------------------------------------------------------
@@ -193,6 +226,8 @@ class TessRenderer:
         self.ctx = gl_context()
         glsl_dispatch_source(self.functions, position=True, surface=False)  # fails early, naming the function
         self._targets: GLTargets | None = None
+        # hybrid frames: the targets of the tiers below the finest (which uses _targets)
+        self._coarse: list[GLTargets | None] = [None] * (len(hybrid_tiers("tess")) - 1)
         c = self.ctx
         self._patches = GrowBuffer(c, 64 * 1024)
         self._params = GrowBuffer(c, 1024)
@@ -233,6 +268,17 @@ class TessRenderer:
         t, self._targets = self._targets, None   # not kept when making new ones fails
         self._targets = targets_for(t, self.ctx, size, ss, samples, "tessellation")
         return self._targets
+
+    def _tier_targets_for(self, tier, size, modes) -> GLTargets:
+        """The targets of hybrid tier ``tier`` of ``modes``: the finest shares the single-view
+        targets (a 4xSS+8xMS frame's); the coarser ones keep their own, with a depth texture the
+        carry into the next tier reads."""
+        if tier == len(modes) - 1:
+            return self._targets_for(size, modes[tier].ss, modes[tier].msaa)
+        t, self._coarse[tier] = self._coarse[tier], None   # not kept when making new ones fails
+        self._coarse[tier] = targets_for(t, self.ctx, size, modes[tier].ss, modes[tier].msaa, "tessellation",
+                                         depth_texture=True)
+        return self._coarse[tier]
 
     def _layered_for(self, size, ss, samples, layers) -> LayeredGLTargets:
         t, self._layered = self._layered, None   # not kept when making new ones fails
@@ -312,6 +358,7 @@ class TessRenderer:
         set_uniform(prog, "u_clamp", (float(settings.l_min), float(settings.l_max)))
         set_uniform(prog, "u_overlap", float(settings.overlap))
         set_uniform(prog, "u_light", tuple(float(x) for x in LIGHT))
+        set_uniform(prog, "u_tier", 0 if settings.color_by == "tier" else -1)   # -1: the material's colour
         for binding, b in enumerate((self._params, self._inst_f, self._inst_u, self._materials)):
             b.buf.bind_to_storage_buffer(binding)
         self._counters.bind_to_storage_buffer(4)
@@ -333,14 +380,15 @@ class TessRenderer:
             "threshold": list(threshold),
             "tess": {"mode": settings.mode, "spacing": settings.spacing, "levels": list(settings.levels),
                      "base_level": settings.base_level, "l_min": settings.l_min, "l_max": settings.l_max,
-                     "overlap": settings.overlap},
+                     "overlap": settings.overlap, "color_by": settings.color_by},
             "render_patches": n,
             "warnings": notes,
         }
 
-    def _draw_list(self, prog, n, settings, passes=(None,), before=None):
-        """Draw the ``n`` uploaded patches with ``prog`` once per pass (``before(pass)`` sets each
-        up); returns (a primitives query per pass, none without patches; draw calls)."""
+    def _draw_list(self, prog, n, settings, passes=(None,), before=None, start=0):
+        """Draw ``n`` uploaded patches from record ``start`` on with ``prog`` once per pass
+        (``before(pass)`` sets each up); returns (a primitives query per pass, none without
+        patches; draw calls)."""
         queries, draw_calls = [], 0
         if n:
             self.ctx.patch_vertices = 1
@@ -351,19 +399,41 @@ class TessRenderer:
                     before(p)
                 queries.append(self.ctx.query(primitives=True))
                 with queries[-1]:
-                    for first in range(0, n, batch):
-                        vao.render(mode=moderngl.PATCHES, vertices=min(batch, n - first), first=first)
+                    for first in range(start, start + n, batch):
+                        vao.render(mode=moderngl.PATCHES, vertices=min(batch, start + n - first), first=first)
                         draw_calls += 1
         return queries, draw_calls
+
+    def _read_frame(self, tg, scene, msaa, notes) -> tuple[Frame, int, int, float, float]:
+        """Resolve ``tg`` and read it back: (Frame, the samples per pixel the device allocated,
+        pixels written, resolve ms, readback ms); a line in ``notes`` when the device allocated
+        other than ``msaa`` samples."""
+        t0 = time.perf_counter()
+        # hardware multisample resolve of the colour, then the SSAA block in a shader
+        device_samples = tg.resolve()
+        t1 = time.perf_counter()
+        color, depth, normal, ids = tg.read()
+        if device_samples != msaa:
+            notes.append(f"the device allocated {device_samples} samples per pixel for a {msaa}-sample "
+                         "request; coverage and the depth/id resolve use all of them")
+        frame = Frame(color=color, depth=depth, normal=normal, object_id=ids)
+        frame.background = scene.background
+        written = int(np.count_nonzero(np.isfinite(depth)))
+        t2 = time.perf_counter()   # readback: textures to host arrays, flipped to row 0 = top
+        return frame, device_samples, written, (t1 - t0) * 1e3, (t2 - t1) * 1e3
 
     def draw(self, render_list: np.ndarray, n: int | None, scene: Scene, camera: Camera,
              settings: TessSettings | None = None, threshold=None) -> Frame:
         """Draw ``n`` records of ``render_list`` (RENDER_DTYPE, from LodStage.read_render_list).
 
         ``threshold``: the effective LOD thresholds (t_u, t_v) in output pixels that made the list,
-        used by adaptive levels; default 84 px divided by ``lod_divisor`` of the AA mode.
+        used by adaptive levels; default 84 px divided by ``lod_divisor`` of the AA mode. With
+        aa "hybrid" they are tier 0's, and the list's patches are drawn by tier (``_draw_hybrid``).
         """
-        return self._draw_one(self._inputs(render_list, n, scene, settings, threshold), scene, camera)
+        checked = self._inputs(render_list, n, scene, settings, threshold)
+        if checked[4].hybrid:
+            return self._draw_hybrid(checked, scene, camera)
+        return self._draw_one(checked, scene, camera)
 
     def _draw_one(self, checked, scene, camera, upload="all") -> Frame:
         """``draw`` with checked inputs (``_inputs``); ``upload``: "all" (the render list, the
@@ -395,19 +465,8 @@ class TessRenderer:
         ctx.finish()
         t3 = time.perf_counter()
 
-        # resolve: hardware multisample resolve of the colour, then the SSAA block in a shader
-        device_samples = tg.resolve()
-        t4 = time.perf_counter()
-
-        color, depth, normal, ids = tg.read()
+        frame, device_samples, written, resolve_ms, readback_ms = self._read_frame(tg, scene, aa.msaa, notes)
         nan_vertices = int(np.frombuffer(self._counters.read(4), np.uint32)[0])
-        if device_samples != aa.msaa:
-            notes.append(f"the device allocated {device_samples} samples per pixel for a {aa.msaa}-sample "
-                         "request; coverage and the depth/id resolve use all of them")
-        frame = Frame(color=color, depth=depth, normal=normal, object_id=ids)
-        frame.background = scene.background
-        written = int(np.count_nonzero(np.isfinite(depth)))
-        t5 = time.perf_counter()   # readback: textures to host arrays, flipped to row 0 = top
         frame.stats = self._stats(ctx, (w, h), req, aa, settings, (tu, tv), n, list(notes))
         frame.stats.update({
             "msaa_samples_device": device_samples,
@@ -416,7 +475,93 @@ class TessRenderer:
             "nan_vertices": nan_vertices,
             "pixels_written": written,
             "ms": {"setup": (t1 - t0) * 1e3, "render_list_upload": (t2 - t1) * 1e3, "draw": (t3 - t2) * 1e3,
-                   "resolve": (t4 - t3) * 1e3, "readback": (t5 - t4) * 1e3, "total": (t5 - t0) * 1e3},
+                   "carry": 0.0, "resolve": resolve_ms, "readback": readback_ms,
+                   "total": (time.perf_counter() - t0) * 1e3},
+        })
+        return frame
+
+    def _draw_hybrid(self, checked, scene, camera) -> Frame:
+        """``draw`` of aa "hybrid" (docs/tessellation.md, "Hybrid anti-aliasing"): the render
+        list ordered by tier (stable), then, coarse to fine, each tier's patches drawn into its
+        targets with its thresholds, each finer tier's targets started from a per-sample copy of
+        the last tier drawn (``GLTargets.carry``; with ``hybrid_targets`` "finest" every tier
+        draws into the finest drawn tier's targets, without copies); the finest tier drawn is
+        resolved. Tiers without patches are skipped, carries and targets included, so a frame
+        whose patches are all tier 0 is the noAA frame.
+
+        Stats: ``draw``'s, with "aa" and "aa_effective" "hybrid", samples per pixel, SSAA, MSAA
+        and LOD divisor of the finest tier drawn (``tier_resolved``), and ``tiers``: per tier its
+        "aa", "patches", "triangles" and "threshold"; ``ms["carry"]``: the carries (0 in other
+        frames)."""
+        settings, render_list, n, req, aa, notes, (tu, tv) = checked
+        notes = list(notes)
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        modes = hybrid_tiers("tess", self.max_samples)
+        divisors = (1.0, *(d for d, _ in tier_divisors(modes, settings.msaa_lod)))
+        tier = render_tiers(render_list[:n])
+        counts = np.bincount(tier, minlength=len(modes))
+        starts = np.cumsum(counts) - counts   # each tier's first record in the ordered list
+        drawn = [k for k in range(len(modes)) if counts[k]] or [0]
+        prog = build_programs(ctx, self.functions, settings.spacing)
+        w, h = camera.size
+        if settings.hybrid_targets == "finest":   # one set of targets: the finest drawn tier's
+            finest = self._tier_targets_for(drawn[-1], (w, h), modes)
+            targets = {k: finest for k in drawn}
+        else:
+            targets = {k: self._tier_targets_for(k, (w, h), modes) for k in drawn}
+        t1 = time.perf_counter()
+        self._upload(render_list[:n][np.argsort(tier, kind="stable")], n, scene)
+        t2 = time.perf_counter()
+
+        set_uniform(prog, "u_view", gl_matrix(camera.view))
+        set_uniform(prog, "u_proj", gl_matrix(camera.projection))
+        set_uniform(prog, "u_near", float(camera.near))
+        self._set_uniforms(prog, settings, (w, h), (tu, tv))
+        tiers = [{"aa": m.name, "patches": int(c), "triangles": 0, "threshold": [tu / d, tv / d]}
+                 for m, c, d in zip(modes, counts, divisors)]
+        draw_calls, carry_s, draw_s, coarse = 0, 0.0, 0.0, None
+        for k in drawn:
+            tg = targets[k]
+            if coarse is None:
+                tg.begin()
+            elif tg is not coarse:
+                ta = time.perf_counter()
+                tg.carry(coarse)
+                ctx.finish()
+                carry_s += time.perf_counter() - ta
+            tb = time.perf_counter()
+            set_uniform(prog, "u_threshold", tuple(tiers[k]["threshold"]))
+            if settings.color_by == "tier":
+                set_uniform(prog, "u_tier", k)
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+            queries, calls = self._draw_list(prog, int(counts[k]), settings, start=int(starts[k]))
+            tiers[k]["triangles"] = sum(int(q.primitives) for q in queries)
+            draw_calls += calls
+            ctx.finish()
+            draw_s += time.perf_counter() - tb
+            coarse = tg
+
+        top = drawn[-1]
+        frame, device_samples, written, resolve_ms, readback_ms = self._read_frame(coarse, scene, modes[top].msaa,
+                                                                                   notes)
+        nan_vertices = int(np.frombuffer(self._counters.read(4), np.uint32)[0])
+        frame.stats = self._stats(ctx, (w, h), modes[top], modes[top], settings, (tu, tv), n, notes)
+        frame.stats.update({
+            "aa": req.name,
+            "aa_effective": aa.name,
+            "lod_divisor": divisors[top],
+            "tier_resolved": top,
+            "tiers": tiers,
+            "msaa_samples_device": device_samples,
+            "triangles": sum(t["triangles"] for t in tiers),
+            "draw_calls": draw_calls,
+            "nan_vertices": nan_vertices,
+            "pixels_written": written,
+            "ms": {"setup": (t1 - t0) * 1e3, "render_list_upload": (t2 - t1) * 1e3, "draw": draw_s * 1e3,
+                   "carry": carry_s * 1e3, "resolve": resolve_ms, "readback": readback_ms,
+                   "total": (time.perf_counter() - t0) * 1e3},
         })
         return frame
 
@@ -439,6 +584,8 @@ class TessRenderer:
         views = as_views(views)
         checked = self._inputs(render_list, n, scene, settings, threshold)
         settings, render_list, n, req, aa, notes, (tu, tv) = checked
+        if aa.hybrid:
+            raise SceneError(HYBRID_VIEWS)
         ctx = self.ctx
         n_views = len(views)
         invocations, passes = view_chunks(n_views, min(settings.views_per_pass, self.max_invocations))
@@ -495,7 +642,7 @@ class TessRenderer:
                              "view_ms": {"resolve": (t5 - t4) * 1e3, "readback": (t6 - t5) * 1e3}})
         t7 = time.perf_counter()
         ms = {"setup": (t1 - t0) * 1e3, "render_list_upload": (t2 - t1) * 1e3, "draw": (t3 - t2) * 1e3,
-              "resolve": sum(p["view_ms"]["resolve"] for p in per_view),
+              "carry": 0.0, "resolve": sum(p["view_ms"]["resolve"] for p in per_view),
               "readback": sum(p["view_ms"]["readback"] for p in per_view), "total": (t7 - t0) * 1e3}
         shared["msaa_samples_device"] = device_samples
         for frame, own in zip(frames, per_view):
@@ -534,8 +681,9 @@ class TessRenderer:
 
 class Tessellation:
     """Per-scene state of the "tess" variant: the scene's device buffers, its LOD stage (thresholds
-    divided by the effective AA mode's ``lod_divisor``) and the TessRenderer. CL -> GL goes through
-    host memory, so a frame waits for the render list; the Frame is read back from GL."""
+    divided by the effective AA mode's ``lod_divisor``; with aa "hybrid" they are tier 0's, and
+    the stage sorts the patches into tiers) and the TessRenderer. CL -> GL goes through host
+    memory, so a frame waits for the render list; the Frame is read back from GL."""
 
     def __init__(self, functions, record: bool = False):
         self.buffers = SceneBuffers(LIGHT)
@@ -547,6 +695,8 @@ class Tessellation:
         """``camera``: a Camera, or a Views for a multi-view frame (a camera record per view)."""
         settings.tess.validate()
         settings.lod.validate()
+        if isinstance(camera, Views) and parse_aa(settings.tess.aa).hybrid:
+            raise SceneError(HYBRID_VIEWS)
         self.scene = scene
         t0 = time.perf_counter()
         self.dev = self.buffers.upload(scene, camera)
@@ -556,14 +706,18 @@ class Tessellation:
         """The Frame of ``camera``, or for a Views one Frame per view from one LOD pass for all."""
         t0 = time.perf_counter()
         _, aa, _ = self.tess.effective_aa(settings.tess.aa)
-        div = aa.divisor(settings.tess.msaa_lod)
+        div = aa.divisor(settings.tess.msaa_lod)   # hybrid: 1, tier 0 is measured in output pixels
         d = self.dev
         multi = isinstance(camera, Views)
         if multi:
             _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], settings.lod, t_div=div,
                                                n_views=len(camera))
         else:
-            _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], settings.lod, t_div=div)
+            tiers = None
+            if aa.hybrid:   # tiers 1 and 2's (threshold divisor, spot-check scale)
+                tiers = tier_divisors(hybrid_tiers("tess", self.tess.max_samples), settings.tess.msaa_lod)
+            _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], settings.lod, t_div=div,
+                                               tiers=tiers)
         t1 = time.perf_counter()
         records = self.lod.read_render_list(n)
         masks = self.lod.read_render_views(n) if multi else None   # the views that see each patch
@@ -581,7 +735,7 @@ class Tessellation:
             ms["render_list"] = ms["render_list_read"] + ms["render_list_upload"]
             ms["upload"] = self._upload_ms
             ms["lod"] = lod_ms
-            ms["render"] = ms["draw"]
+            ms["render"] = ms["draw"] + ms["carry"]   # carry: a hybrid frame's copies between tiers
             ms["frame"] = (t3 - t0) * 1e3 + self._upload_ms - ms["readback"]
             ms["total"] = (t3 - t0) * 1e3 + self._upload_ms
             frame.stats.update({
@@ -594,5 +748,5 @@ class Tessellation:
 
 
 register_renderer(RendererSpec("tess", "parametric", Tessellation, "tess", "gl", TessSettings,
-                               "OpenGL 4.5 hardware tessellation of the render patches, noAA/MSAA/SSAA",
+                               "OpenGL 4.5 hardware tessellation of the render patches, noAA/MSAA/SSAA/hybrid",
                                takes_aa="all", multiview=True))

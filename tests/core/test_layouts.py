@@ -57,7 +57,7 @@ def test_host_names_derive_from_the_declarations():
     assert RENDER_DTYPE == RENDER_PATCH.dtype and RENDER_DTYPE.itemsize == 64
     assert (scene.INST_FLOATS, scene.INST_UINTS) == (INSTANCE_F.length, INSTANCE_U.length) == (32, 4)
     assert layouts.CAMERA_FLOATS == CAMERA.length == 36
-    assert (stage.LOD_COUNTERS, stage.LOD_RENDER_TOTAL, stage.LOD_LOCAL) == (8, 1, 32)
+    assert (stage.LOD_COUNTERS, stage.LOD_RENDER_TOTAL, stage.LOD_LOCAL) == (10, 1, 32)
     assert [stage.C_CHILDREN, stage.C_SPLIT, stage.C_CULLED, stage.C_RENDERED, stage.C_FORCED] == [0, 1, 2, 3, 4]
     # the light record is what the renderers upload, and GLSL reads it as vec4 u_light (xyz, w)
     assert shading.LIGHT.shape == (LIGHT.length,) and LIGHT.slice("towards") == slice(0, 3)

@@ -14,8 +14,9 @@ class ParametricStage:
     def upload(self, scene, camera) -> dict:
         return self.buffers.upload(scene, camera)
 
-    def render_list(self, scene, camera, lod):
-        """The LOD stage run once for ``camera``: (render list, per-step stats)."""
+    def render_list(self, scene, camera, lod, tiers=None):
+        """The LOD stage run once for ``camera`` (``tiers``: hybrid tiers 1 and 2's divisors):
+        (render list, per-step stats)."""
         dev = self.upload(scene, camera)
-        _, n, steps, _ = self.lod.run(dev["inst"], dev["domains"], dev["cam"], lod)
+        _, n, steps, _ = self.lod.run(dev["inst"], dev["domains"], dev["cam"], lod, tiers=tiers)
         return self.lod.read_render_list(n), steps

@@ -12,8 +12,9 @@ the mesh LOD measurements (extra "meshes", paramlod.app.bench.meshes) and, on re
 evaluation of full mesh / discrete chain / cluster DAG (extra "mesh-eval",
 paramlod.app.bench.mesh_eval) and the skinned giant worm with its culling on and off (extra
 "skinned", paramlod.app.bench.skinned), the viewer's presenting overhead (extra "viewer",
-paramlod.app.bench.viewer) and multi-view frames against as many single ones (extra "multiview",
-paramlod.app.bench.multiview). ``--only-extras`` skips the parametric scenarios.
+paramlod.app.bench.viewer), multi-view frames against as many single ones (extra "multiview",
+paramlod.app.bench.multiview) and hybrid anti-aliasing against uniform anti-aliasing from far to near
+(extra "hybrid", paramlod.app.bench.hybrid). ``--only-extras`` skips the parametric scenarios.
 Results go to DIR/results.json (written after every measurement), DIR/results.md and plots.
 """
 from __future__ import annotations
@@ -31,6 +32,7 @@ import pyopencl as cl
 
 from paramlod.app.args import add_size, check_folder, non_negative_int, positive_float, positive_int
 from paramlod.app.bench.functions import format_function_throughput, function_throughput
+from paramlod.app.bench.hybrid import add_arguments as add_hybrid_arguments, format_hybrid, plot_hybrid, run_hybrid
 from paramlod.app.bench.mesh_eval import SCENARIOS as EVAL_SCENARIOS, THRESHOLDS as EVAL_THRESHOLDS
 from paramlod.app.bench.mesh_eval import format_mesh_eval, plot_mesh_eval, run_mesh_eval
 from paramlod.app.bench.meshes import format_meshes, run_meshes
@@ -57,7 +59,8 @@ from paramlod.surfels.render import FixedCount, default_camera, render_surfels
 # name -> (render variant, AA mode); points-4xSS is the direct variant drawn into 2x2 supersampled
 # key buffers, points-ssaa the thesis's local-framebuffer 4xSS
 VARIANTS = {"points": ("points", None), "points-4xSS": ("points", "4xSS"), "points-ssaa": ("points-ssaa", None),
-            "tess": ("tess", "noAA"), "tess-4xSS+8xMS": ("tess", "4xSS+8xMS")}
+            "tess": ("tess", "noAA"), "tess-4xSS+8xMS": ("tess", "4xSS+8xMS"),
+            "points-hybrid": ("points", "hybrid"), "tess-hybrid": ("tess", "hybrid")}
 DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8xMS"]
 NO_CULLING = "(no culling)"   # the label of rows measured with --culling off / both
 
@@ -73,14 +76,17 @@ def add_arguments(p):
     p.add_argument("--frames", type=positive_int, default=8, help="timed frames per orbit (default 8)")
     p.add_argument("--warmup", type=non_negative_int, default=2, help="untimed frames before each orbit (default 2)")
     p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels", "meshes"],
-                   choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval", "skinned", "viewer", "multiview"],
+                   choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval", "skinned", "viewer", "multiview",
+                            "hybrid"],
                    help="extra measurements (default all but mesh-eval, the full / chain / DAG evaluation, "
                         "skinned, the rigged giant worm with its conservative culling, viewer, the "
-                        "interactive viewer's presenting overhead, and multiview, N views in one frame)")
+                        "interactive viewer's presenting overhead, multiview, N views in one frame, and hybrid, "
+                        "hybrid anti-aliasing against uniform 4xSS+8xMS / 16xSS from far to near, with FLIP)")
     p.add_argument("--views", type=positive_int, nargs="+", default=list(VIEW_SETS),
                    help="multiview: view counts (2: a stereo pair, others: quilts; default 2 6 48)")
     p.add_argument("--multiview-scenes", nargs="+", choices=list(SCENARIOS), default=list(MULTIVIEW_SCENES),
                    help="multiview: scenarios (default hardi12 yarn_curtain sphere)")
+    add_hybrid_arguments(p)
     p.add_argument("--only-extras", action="store_true", help="skip the parametric scenarios: only the extras")
     p.add_argument("--big-mesh", choices=["auto", "yes", "no"], default="auto",
                    help="also measure a 1.6 M-triangle mesh (default: on a GPU only)")
@@ -363,6 +369,10 @@ def run_bench(args) -> int:
         result["multiview"] = run_multiview(size, args.frames, args.warmup, args.multiview_scenes, variants,
                                             args.views, log=lambda m: print(m, flush=True))
         save()
+    if "hybrid" in args.extras:
+        result["hybrid"] = run_hybrid(size, args.frames, args.warmup, args.hybrid_scenes, args.hybrid_distances,
+                                      reference=args.hybrid_reference, log=lambda m: print(m, flush=True))
+        save()
     if "mesh-eval" in args.extras:
         big = args.big_mesh == "yes" or (args.big_mesh == "auto" and dev.is_gpu)
         result["mesh_eval"] = run_mesh_eval(size, args.frames, args.warmup, big, args.mesh_grid, args.eval_thresholds,
@@ -438,6 +448,8 @@ def format_markdown(result) -> str:
         lines += format_multiview(result["multiview"])
     if "mesh_eval" in result:
         lines += format_mesh_eval(result["mesh_eval"])
+    if "hybrid" in result:
+        lines += format_hybrid(result["hybrid"])
     return "\n".join(lines) + "\n"
 
 
@@ -500,4 +512,6 @@ def make_plots(result, out: Path) -> list[Path]:
         paths.append(p)
     if "mesh_eval" in result:
         paths += plot_mesh_eval(result["mesh_eval"], out)
+    if "hybrid" in result:
+        paths += plot_hybrid(result["hybrid"], out)
     return paths
