@@ -63,13 +63,16 @@ inline bool spot_turns(uint func, __global const float* P, __global const float*
 }
 
 // Silhouettes (hybrid tier 0 only): a patch over which the surface turns from facing the view to
-// facing away has a silhouette edge, whose pixels need coverage anti-aliasing even where the
-// surface has no sub-pixel detail; it goes to tier 1 (multisampling, or 4xSS for points). The
-// normals are finite differences of the LOD step's 5 x 5 grid of world positions g[25] (w != 0: a
-// bad sample), central inside the grid, one-sided on its edges; the facing is that of the view at
-// `cam` (view_dir: towards the eye, or the view axis when orthographic).
+// facing away, or which comes within SIL_GRAZE of edge-on (a silhouette on its border: a glyph's
+// lobes split along their equator), has a silhouette edge, whose pixels need coverage
+// anti-aliasing even where the surface has no sub-pixel detail; it goes to tier 1 (multisampling,
+// or 4xSS for points). The normals are finite differences of the LOD step's 5 x 5 grid of world
+// positions g[25] (w != 0: a bad sample), central inside the grid, one-sided on its edges; the
+// facing is the cosine to the view at `cam` (view_dir: towards the eye, or the view axis when
+// orthographic).
+#define SIL_GRAZE 0.17f   // cos 80 degrees
 inline bool grid_silhouette(__local const float4* g, __global const float* cam) {
-    bool front = false, back = false;
+    bool front = false, back = false, grazing = false;
     for (uint k = 0; k < 25u; ++k) {
         uint i = k % 5u, j = k / 5u;
         float4 u1 = g[j * 5u + min(i + 1u, 4u)], u0 = g[j * 5u + (i == 0u ? 0u : i - 1u)];
@@ -77,9 +80,10 @@ inline bool grid_silhouette(__local const float4* g, __global const float* cam) 
         if (g[k].w != 0.0f || u1.w != 0.0f || u0.w != 0.0f || v1.w != 0.0f || v0.w != 0.0f) continue;
         float3 e = xform_point(cam + CAM_VIEW, g[k].xyz);
         float3 n = xform_dir(cam + CAM_VIEW, cross(u1.xyz - u0.xyz, v1.xyz - v0.xyz));
-        float s = dot(n, view_dir(cam, e));
+        float s = dot(n, view_dir(cam, e)) / length(n);
         front |= s > 0.0f;
         back |= s < 0.0f;
+        grazing |= fabs(s) < SIL_GRAZE;
     }
-    return front && back;
+    return (front && back) || grazing;
 }

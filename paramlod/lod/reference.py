@@ -497,9 +497,13 @@ def spot_counts(patches, scene_inst, functions, most_u, most_v, scale, spot_cos)
     return turns.reshape(n, -1).sum(axis=1)
 
 
+SIL_GRAZE = F(0.17)   # spot.cl SIL_GRAZE
+
+
 def grid_silhouettes(patches, scene_inst, functions, cams, seen) -> np.ndarray:
     """Twin of spot.cl grid_silhouette: per patch, whether in some view that sees it (``seen``:
-    (views, n)) the finite-difference normals of its 5 x 5 grid face both towards and away."""
+    (views, n)) the finite-difference normals of its 5 x 5 grid face both towards and away, or
+    one of them comes within SIL_GRAZE (cosine) of edge-on."""
     r = patches["range"].astype(F)
     n = len(r)
     g = np.arange(5, dtype=F) * F(0.25)
@@ -521,8 +525,9 @@ def grid_silhouettes(patches, scene_inst, functions, cams, seen) -> np.ndarray:
                 towards = np.broadcast_to(np.array([0, 0, 1], F), e.shape)
             else:
                 towards = -e / _norm(e)[..., None]
-            facing = (ne * towards).sum(-1, dtype=F)
+            facing = ((ne * towards).sum(-1, dtype=F) / _norm(ne)).astype(F)
         front = (ok & (facing > 0)).any(axis=(1, 2))
         back = (ok & (facing < 0)).any(axis=(1, 2))
-        out |= seen[view] & front & back
+        grazing = (ok & (np.abs(facing) < SIL_GRAZE)).any(axis=(1, 2))
+        out |= seen[view] & ((front & back) | grazing)
     return out

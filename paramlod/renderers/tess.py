@@ -46,7 +46,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import moderngl
@@ -85,6 +85,9 @@ MAX_INVOCATIONS = 32
 VIEW_FLOATS = 36   # a PlViews record (kernels/tess/tess_views.glsl, std140): view, proj, near (vec4)
 COLOR_BY = ("material", "tier")   # TessSettings.color_by
 HYBRID_TARGETS = ("tiers", "finest")   # TessSettings.hybrid_targets
+# TessSettings.detail_levels: the threshold divisors of the spot check's tiers 0, 1, 2 (the pixel of
+# 8xMS and of 4xSS+8xMS: the detail each tier's spot check looks for)
+DETAIL_DIVISORS = (1.0, math.sqrt(8.0), math.sqrt(32.0))
 HYBRID_VIEWS = ('anti-aliasing "hybrid" draws one view at a time (its tiers carry one view\'s targets into the '
                 'next); render each camera with render(), or use another mode for render_views')
 
@@ -117,6 +120,13 @@ class TessSettings:
     coarser (``GLTargets.carry``); or "finest", every tier drawn with its own thresholds straight
     into the finest drawn tier's targets (no copies; the coarser tiers' patches are multisampled
     too). The tiers then differ only in the patches and levels the LOD gives them.
+
+    ``detail_levels`` (other modes than hybrid, one view): the LOD stage's spot check also runs,
+    and a patch with detail finer than a pixel is measured again at the threshold divided by
+    sqrt(8), then sqrt(32) (``DETAIL_DIVISORS``), and tessellated for that threshold in the same
+    targets: a thin SH lobe on a glyph of 20 pixels gets the segments it needs (docs/hybrid.md,
+    "Detail levels"). Off by default: a field of thousands of small glyphs sends nearly every
+    patch on, measured up to three times and tessellated up to 5.7 times as finely.
     """
 
     mode: str = "adaptive"
@@ -131,6 +141,7 @@ class TessSettings:
     views_per_pass: int = 1
     color_by: str = "material"
     hybrid_targets: str = "tiers"
+    detail_levels: bool = False
 
     def validate(self):
         if self.mode not in ("adaptive", "fixed"):
@@ -155,6 +166,8 @@ class TessSettings:
             raise SceneError(f"tess views_per_pass must be a whole number in 1..{MAX_INVOCATIONS}, got {k!r}")
         if self.color_by not in COLOR_BY:
             raise SceneError(f"tess color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
+        if not isinstance(self.detail_levels, (bool, np.bool_)):
+            raise SceneError(f"tess detail_levels must be true or false, got {self.detail_levels!r}")
         if self.hybrid_targets not in HYBRID_TARGETS:
             raise SceneError(f"tess hybrid_targets must be one of {', '.join(HYBRID_TARGETS)}, "
                              f"got {self.hybrid_targets!r}")
@@ -447,6 +460,11 @@ class TessRenderer:
         resolve_program(ctx, aa.ss, aa.msaa)   # compiled with the setup (targets_for reuses it)
         w, h = camera.size
         tg = self._targets_for((w, h), aa.ss, aa.msaa)
+        # detail_levels: the patches the spot check sent on, drawn last with their finer thresholds
+        tier = render_tiers(render_list[:n])
+        counts = np.bincount(tier, minlength=len(DETAIL_DIVISORS))
+        if counts[0] != n:
+            render_list = render_list[:n][np.argsort(tier, kind="stable")]
         t1 = time.perf_counter()
         if upload:
             self._upload(render_list, n, scene, patches_only=upload == "patches")
@@ -460,7 +478,12 @@ class TessRenderer:
         tg.begin()
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
-        queries, draw_calls = self._draw_list(prog, n, settings)
+        queries, draw_calls, start = [], 0, 0
+        for k, count in enumerate(counts):
+            if k:
+                set_uniform(prog, "u_threshold", (tu / DETAIL_DIVISORS[k], tv / DETAIL_DIVISORS[k]))
+            q, calls = self._draw_list(prog, int(count), settings, start=start)
+            queries, draw_calls, start = queries + q, draw_calls + calls, start + int(count)
         triangles = sum(int(q.primitives) for q in queries)
         ctx.finish()
         t3 = time.perf_counter()
@@ -471,6 +494,7 @@ class TessRenderer:
         frame.stats.update({
             "msaa_samples_device": device_samples,
             "triangles": triangles,
+            "detail_patches": [int(c) for c in counts],
             "draw_calls": draw_calls,
             "nan_vertices": nan_vertices,
             "pixels_written": written,
@@ -713,11 +737,13 @@ class Tessellation:
             _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], settings.lod, t_div=div,
                                                n_views=len(camera))
         else:
-            tiers = None
+            tiers, lod = None, settings.lod
             if aa.hybrid:   # tiers 1 and 2's (threshold divisor, spot-check scale)
                 tiers = tier_divisors(hybrid_tiers("tess", self.tess.max_samples), settings.tess.msaa_lod)
-            _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], settings.lod, t_div=div,
-                                               tiers=tiers)
+            elif settings.tess.detail_levels:   # the spot check's tiers in this mode's targets
+                tiers = tuple((div * d, d) for d in DETAIL_DIVISORS[1:])
+                lod = replace(lod, spot_silhouettes=False)   # edges: a matter of anti-aliasing, not levels
+            _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], lod, t_div=div, tiers=tiers)
         t1 = time.perf_counter()
         records = self.lod.read_render_list(n)
         masks = self.lod.read_render_views(n) if multi else None   # the views that see each patch
