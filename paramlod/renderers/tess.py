@@ -84,7 +84,7 @@ PATCH_FORMAT = vertex_format(RENDER_PATCH, PATCH_ATTRIBUTES)   # "4f 16x 4f 1u 1
 MAX_INVOCATIONS = 32
 VIEW_FLOATS = 36   # a PlViews record (kernels/tess/tess_views.glsl, std140): view, proj, near (vec4)
 COLOR_BY = ("material", "tier")   # TessSettings.color_by
-HYBRID_TARGETS = ("tiers", "finest")   # TessSettings.hybrid_targets
+HYBRID_TARGETS = ("tiers", "pair", "finest")   # TessSettings.hybrid_targets
 # TessSettings.detail_levels: the threshold divisors of the spot check's tiers 0, 1, 2 (the pixel of
 # 8xMS and of 4xSS+8xMS: the detail each tier's spot check looks for)
 DETAIL_DIVISORS = (1.0, math.sqrt(8.0), math.sqrt(32.0))
@@ -117,9 +117,11 @@ class TessSettings:
 
     ``hybrid_targets`` (``aa = "hybrid"``): "tiers", the thesis's scheme, each tier drawn into
     targets of its own mode, coarsest first, each finer one started from a per-sample copy of the
-    coarser (``GLTargets.carry``); or "finest", every tier drawn with its own thresholds straight
-    into the finest drawn tier's targets (no copies; the coarser tiers' patches are multisampled
-    too). The tiers then differ only in the patches and levels the LOD gives them.
+    coarser (``GLTargets.carry``); "pair", tier 0 into its noAA targets and tiers 1 and 2 into the
+    finest drawn tier's, one copy from a single-sampled target (per pixel, not per sample: the
+    cheap one); or "finest", every tier drawn with its own thresholds straight into the finest
+    drawn tier's targets (no copies; the coarser tiers' patches are multisampled too). The tiers
+    then differ only in the patches and levels the LOD gives them.
 
     ``detail_levels`` (other modes than hybrid, one view): the LOD stage's spot check also runs,
     and a patch with detail finer than a pixel is measured again at the threshold divided by
@@ -529,11 +531,10 @@ class TessRenderer:
         drawn = [k for k in range(len(modes)) if counts[k]] or [0]
         prog = build_programs(ctx, self.functions, settings.spacing)
         w, h = camera.size
-        if settings.hybrid_targets == "finest":   # one set of targets: the finest drawn tier's
-            finest = self._tier_targets_for(drawn[-1], (w, h), modes)
-            targets = {k: finest for k in drawn}
-        else:
-            targets = {k: self._tier_targets_for(k, (w, h), modes) for k in drawn}
+        # each tier drawn into its own targets, or (hybrid_targets) into the finest drawn tier's
+        shared = {"tiers": (), "pair": tuple(drawn[1:]), "finest": tuple(drawn)}[settings.hybrid_targets]
+        finest = self._tier_targets_for(drawn[-1], (w, h), modes)
+        targets = {k: finest if k in shared else self._tier_targets_for(k, (w, h), modes) for k in drawn}
         t1 = time.perf_counter()
         self._upload(render_list[:n][np.argsort(tier, kind="stable")], n, scene)
         t2 = time.perf_counter()

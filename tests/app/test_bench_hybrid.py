@@ -133,7 +133,7 @@ def test_bench_cli_runs_the_extra_with_tess_and_writes_json_markdown_plot(tmp_pa
         assert 0.0 <= r["flip"] <= 1.0 and sum(r["tier_patches"]) == r["render_patches"]
         if r["render_variant"] == "tess":
             assert r["aa_effective"] and r["triangles"] > 0
-    assert set(sc["aims"]) == {"tess", "tess-finest", "points"}
+    assert set(sc["aims"]) == {"tess", "tess-pair", "tess-finest", "points"}
     md = (tmp_path / "results.md").read_text()
     assert "## Hybrid anti-aliasing (issue #21)" in md and "| 0.6 | tess-hybrid" in md
     try:

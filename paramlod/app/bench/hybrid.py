@@ -54,14 +54,16 @@ from paramlod.scene.scene import Material, Scene
 DISTANCES = (4.0, 2.0, 1.0, 0.6, 0.35)
 SCENES = ("seashell3", "yarn_curtain", "hardi12")
 # name -> (render variant, AA mode), in the order they are drawn at each distance
-VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-finest": ("tess", "hybrid"),
+VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-pair": ("tess", "hybrid"),
+            "tess-hybrid-finest": ("tess", "hybrid"),
             "tess-4xSS+8xMS": ("tess", "4xSS+8xMS"),
             "points-hybrid": ("points", "hybrid"), "points-16xSS": ("points", "16xSS"),
             "points-noAA": ("points", "noAA"), "tess-noAA": ("tess", "noAA")}
 # variants drawn with TessSettings.hybrid_targets other than the default "tiers"
-TESS_TARGETS = {"tess-hybrid-finest": "finest"}
+TESS_TARGETS = {"tess-hybrid-pair": "pair", "tess-hybrid-finest": "finest"}
 # the hybrid variant and the uniform mode it is measured against
-PAIRS = {"tess": ("tess-hybrid", "tess-4xSS+8xMS"), "tess-finest": ("tess-hybrid-finest", "tess-4xSS+8xMS"),
+PAIRS = {"tess": ("tess-hybrid", "tess-4xSS+8xMS"), "tess-pair": ("tess-hybrid-pair", "tess-4xSS+8xMS"),
+         "tess-finest": ("tess-hybrid-finest", "tess-4xSS+8xMS"),
          "points": ("points-hybrid", "points-16xSS")}
 REFERENCE_TESS = ("tess", "16xSS+8xMS")
 REFERENCE_POINTS = ("points", "16xSS")
