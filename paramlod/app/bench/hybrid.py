@@ -189,6 +189,26 @@ def measure(scene, cam, variant: str, aa: str, rs: RenderSettings, frames: int, 
 
 
 # --- the reference -------------------------------------------------------------------------------
+def _draw_twice(scene, cams: dict, order, variant: str, rs, budget_s: float | None = None):
+    """({distance: image}, per-distance records, None) of ``variant`` drawn twice per distance (the
+    redraw's FLIP against the first is the floor under every row's); or (.., .., why) when a first
+    draw took longer than ``budget_s``."""
+    images, per = {}, []
+    for d in order:
+        t0 = time.perf_counter()
+        f, notes = _draw(scene, cams[d], variant, rs)
+        a = np.array(f.rgb8(), copy=True)
+        secs = time.perf_counter() - t0
+        if budget_s is not None and secs > budget_s:
+            return images, per, f"{variant} took {secs:.1f} s for one frame at distance {d:g} (budget {budget_s:g} s)"
+        b = np.array(_draw(scene, cams[d], variant, rs)[0].rgb8(), copy=True)
+        images[d] = a
+        per.append({"distance": d, "seconds": secs, "aa_effective": str(f.stats.get("aa_effective", "")),
+                    "render_patches": int(f.stats.get("render_patches", 0)), "redraw_flip": flip(a, b),
+                    **({"notes": notes} if notes else {})})
+    return images, per, None
+
+
 def references(scene, cams: dict, threshold, l_max, l_min, reference: str = "auto",
                budget_s: float = REFERENCE_BUDGET_S, log=print) -> tuple[dict, dict]:
     """({distance: image}, info) of the scene's reference, drawn twice per distance (nearest first:
@@ -199,21 +219,8 @@ def references(scene, cams: dict, threshold, l_max, l_min, reference: str = "aut
         variant, aa = REFERENCE_TESS
         try:
             rs = settings(variant, aa, threshold, l_max, l_min)
-            images, per = {}, []
-            for d in order:
-                t0 = time.perf_counter()
-                f, notes = _draw(scene, cams[d], variant, rs)
-                a = np.array(f.rgb8(), copy=True)
-                secs = time.perf_counter() - t0
-                if reference == "auto" and secs > budget_s:
-                    why = f"tess {aa} took {secs:.1f} s for one frame at distance {d:g} (budget {budget_s:g} s)"
-                    break
-                b = np.array(_draw(scene, cams[d], variant, rs)[0].rgb8(), copy=True)
-                images[d] = a
-                per.append({"distance": d, "seconds": secs, "aa_effective": str(f.stats.get("aa_effective", aa)),
-                            "render_patches": int(f.stats.get("render_patches", 0)), "redraw_flip": flip(a, b),
-                            **({"notes": notes} if notes else {})})
-            else:
+            images, per, why = _draw_twice(scene, cams, order, variant, rs, budget_s if reference == "auto" else None)
+            if why is None:
                 ran = sorted({p["aa_effective"] for p in per})
                 return images, {"variant": variant, "aa": aa, "ran": ", ".join(ran), "per_distance": per,
                                 "label": f"tess {aa}" + (f" (ran {', '.join(ran)})" if ran != [aa] else "")}
@@ -224,16 +231,9 @@ def references(scene, cams: dict, threshold, l_max, l_min, reference: str = "aut
         log(f"hybrid reference: {why}; using points {REFERENCE_POINTS[1]} at density {REFERENCE_POINTS_DENSITY:g}")
     variant, aa = REFERENCE_POINTS
     rs = settings(variant, aa, threshold, l_max, l_min, density=REFERENCE_POINTS_DENSITY)
-    images, per = {}, []
-    for d in order:
-        t0 = time.perf_counter()
-        f, notes = _draw(scene, cams[d], variant, rs)
-        a = np.array(f.rgb8(), copy=True)
-        secs = time.perf_counter() - t0
-        b = np.array(_draw(scene, cams[d], variant, rs)[0].rgb8(), copy=True)
-        images[d] = a
-        per.append({"distance": d, "seconds": secs, "render_patches": int(f.stats.get("render_patches", 0)),
-                    "redraw_flip": flip(a, b), **({"notes": notes} if notes else {})})
+    images, per, _ = _draw_twice(scene, cams, order, variant, rs)
+    for p in per:   # the points variant has no effective AA of its own
+        p.pop("aa_effective")
     info = {"variant": variant, "aa": aa, "density": REFERENCE_POINTS_DENSITY, "per_distance": per,
             "label": f"points {aa}, density {REFERENCE_POINTS_DENSITY:g}"}
     if why:

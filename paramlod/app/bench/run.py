@@ -50,6 +50,7 @@ from paramlod.function.programs import kernel
 from paramlod.lod.stage import LodSettings
 from paramlod.pipeline.driver import render, render_on_device, scene_state
 from paramlod.pipeline.settings import RenderSettings
+from paramlod.renderers.aa import POINT_TIERS
 from paramlod.renderers.tess import TessSettings
 from paramlod.scene.framing import framing_camera, scene_box
 from paramlod.scene.scene import Scene
@@ -172,7 +173,9 @@ def _rss_mib() -> float:
         return float("nan")
 
 
-def _device_buffers_mib(scene, size, ss: int = 1) -> float:
+def _device_buffers_mib(scene, size, ss=(1,)) -> float:
+    """Device memory of the frame's buffers; ``ss``: the subsamples per pixel side of each key
+    buffer set drawn into (a hybrid pass has one per tier)."""
     total = 0
     for r in scene_state(scene).renderer_states():
         lod, points = getattr(r, "lod", None), getattr(r, "points", None)
@@ -182,7 +185,7 @@ def _device_buffers_mib(scene, size, ss: int = 1) -> float:
             total += points.order_capacity * 8   # the point renderer's schedule
     w, h = size
     total += w * h * (16 + 40)   # key buffers + resolved outputs
-    total += w * h * ss * ss * 16 if ss > 1 else 0   # supersampled key buffers (points-4xSS)
+    total += sum(w * h * k * k * 16 for k in ss if k > 1)   # supersampled key buffers (points-4xSS, hybrid tiers)
     return total / 2 ** 20
 
 
@@ -230,7 +233,9 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         "lod_steps_in": [med(s["lod_steps"][i]["in"] for s in st) for i in range(len(st[0].get("lod_steps", [])))],
         "samples": med(s.get("samples", 0) for s in st),
         "atomics": med(s.get("atomics", 0) for s in st),
-        "device_buffers_mib": _device_buffers_mib(scene, size, rs.points.supersample if variant == "points" else 1),
+        "device_buffers_mib": _device_buffers_mib(scene, size, (1,) if variant != "points" else
+                                                  tuple(t.ss for t in POINT_TIERS) if rs.points.hybrid else
+                                                  (rs.points.supersample,)),
         "host_rss_mib": _rss_mib(),
     }
     if variant == "tess":
