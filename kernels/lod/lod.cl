@@ -39,6 +39,12 @@
 // that sees it sees only its back (cone_back); twin: reference.normal_cones, cone_back. With the
 // flag clear, or backface = 0, nothing of this runs and the step is the step without it.
 //
+// Hybrid tiers (max_tier > 0; docs/hybrid.md): every patch carries its tier (EvalPatch.tier, then
+// RenderPatch.flags >> TIER_SHIFT) and is measured with its tier's thresholds. One about to be
+// rendered at a tier below max_tier is checked first (lod/spot.cl: a silhouette from tier 0, the
+// spot check's sub-pixel detail) and, if either is found, goes back unsplit as one child of the
+// next tier (LOD_PROMOTED). With max_tier 0 nothing of this runs.
+//
 // Counters: one record of LOD_COUNTERS uints per step (LOD_CHILDREN, LOD_SPLIT, ..., LOD_BACKFACE: the back-facing
 // culls); record 0
 // holds the initial patch count and, at LOD_RENDER_TOTAL, the render list's length. These, the
@@ -277,7 +283,7 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
     bool d = split_half(ev, mixed + 4, 2u, t_v);   // v-lines in the right u half
     bool split = a || b || c || d;
 
-    if (promote) {   // the spot check found sub-pixel detail: measured again at the next tier
+    if (promote) {   // a silhouette or sub-pixel detail (lod/spot.cl): measured again at the next tier
         atomic_inc(&counters[LOD_PROMOTED]);
         uint s = atomic_add(&counters[LOD_CHILDREN], 1u);
         emit(out, s, out_cap, u0, u1, v0, v1, inst, patch.tier + 1u);
