@@ -80,7 +80,10 @@ def _key_ss(group: Group, settings) -> tuple[int, bool]:
             raise SceneError(f"points-ssaa takes no per-object aa ({group.aa!r}): its subsamples are "
                              "settings.ssaa.ss ([ssaa] ss in a scene file)")
         return 1, False
-    hybrid = settings.points.hybrid if group.aa is None else parse_aa(group.aa).hybrid
+    if group.aa is None:
+        hybrid, ss = settings.points.hybrid, settings.points.supersample
+    else:
+        hybrid, ss = parse_aa(group.aa).hybrid, supersampling_only(group.aa)
     if hybrid:   # a renderer without tiers draws into the hybrid pass's tier 0
         return POINT_TIERS[-1].ss, True
-    return settings.points.supersample if group.aa is None else supersampling_only(group.aa), False
+    return ss, False

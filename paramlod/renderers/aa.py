@@ -132,12 +132,12 @@ def cap_samples(requested: int, max_samples: int) -> int:
 
 def supersampling_only(mode) -> int:
     """The supersampling factor of ``mode`` for a renderer that cannot multisample (the points
-    variant); a SceneError names the mode if it multisamples."""
+    variant; "hybrid" is its tiers, POINT_TIERS); a SceneError names the mode if it multisamples."""
     aa = parse_aa(mode)
     if aa.msaa > 1:
         raise SceneError(f"anti-aliasing {mode!r}: the points variant supersamples only (4xSS, 9xSS, "
                          f"16xSS) or draws \"hybrid\"; multisampling is a mode of the tess variant")
-    return POINT_TIERS[-1].ss if aa.hybrid else aa.ss
+    return aa.ss
 
 
 # points-ssaa's local framebuffer holds 2x2 or 3x3 subsamples (SsaaSettings.ss)

@@ -12,7 +12,10 @@ Every renderer follows one protocol, driven by ``paramlod.pipeline``:
 ``enqueue(target, settings)`` (its work, without waiting; a "gl" renderer is given the camera and
 returns its Frame), ``collect()`` (enqueue the copies of its counters), then, after the driver's
 one wait, ``grow(settings)`` (True if a buffer grew and the frame must be drawn again) and
-``stats()`` (its counters and device times).
+``stats()`` (its counters and device times). A "keys" renderer whose state class sets
+``tiered = True`` draws hybrid anti-aliasing's tiers (``aa = "hybrid"``): the driver calls
+``enqueue(target, settings, tier=k)`` once per tier, coarsest first, each with that tier's key
+buffers; other key renderers of a hybrid pass draw once, into tier 0.
 
 Multi-view frames (``paramlod.render_views``): a renderer registered with ``multiview=True`` is
 given a ``paramlod.core.views.Views`` as its camera (N cameras of one size); a "keys" renderer

@@ -14,6 +14,7 @@ Host code only (no kernel, so no twin); deterministic: exact cKDTree queries, su
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 ITERATIONS = 16   # iterations for G-buffers of at least FINE x sqrt(n) pixels a side
 COARSE_ITERATIONS = 24   # below that the surfels start nearer the pixel grid and need more
@@ -55,8 +56,6 @@ class _Nearest:
         self.gbuf, self.tree, self.index = gbuf, None, None
 
     def __call__(self, x):
-        from scipy.spatial import cKDTree
-
         if self.tree is None:
             self.index = np.flatnonzero(self.gbuf.valid.reshape(-1))
             self.tree = cKDTree(self.gbuf.position.reshape(-1, 4)[self.index, :3])
@@ -76,8 +75,6 @@ def relax(gbuf, pix: np.ndarray, iterations: int = ITERATIONS, spread: float = S
     (global G-buffer indices, in sampling order), and the pixel each ends on (int64 (n,): its
     normal and colour). A surfel with no pixel of its sheet under its new place (it would slide
     past a border) stays where it was for that iteration."""
-    from scipy.spatial import cKDTree
-
     gpos = gbuf.position.reshape(-1, 4)
     gnrm = gbuf.normal.reshape(-1, 3)
     q = np.asarray(pix, np.int64).copy()

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import trimesh
 
 from paramlod.app.bench import peers as P
 from paramlod.dmri.sh import coefficient_count
@@ -168,7 +169,6 @@ def test_fury_draws_the_reference_silhouette():
 def test_poisson_disk_peers_sample_the_bunny_evenly(tool):
     pytest.importorskip(tool)
     pytest.importorskip("pymeshfix")
-    import trimesh
 
     path = P.bunny_path()
     got = P.run_worker(tool, {"mesh": path, "counts": [2000]})

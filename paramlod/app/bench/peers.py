@@ -36,6 +36,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 import trimesh
 
 from paramlod.app.args import parse_size, positive_float, positive_int
@@ -485,8 +486,6 @@ def run_worker(tool: str, job: dict, timeout: float = WORKER_TIMEOUT_S) -> tuple
 def evenness(points, area: float) -> dict:
     """Nearest-neighbour distances of ``points`` on a surface of ``area``, over the spacing of a
     hexagonal packing of as many points (sqrt(2 A / (sqrt(3) n))): min, mean and CV (std / mean)."""
-    from scipy.spatial import cKDTree
-
     pts = np.asarray(points, np.float64)
     if len(pts) < 2:
         raise ParamlodError(f"evenness: needs at least 2 points, got {len(pts)}")
