@@ -66,10 +66,10 @@ def _holes(frame, fn, cam, params, dist):
 # lines' segments (1/7 of a patch side, patches up to the 84-pixel threshold): ripples down to a
 # period of about 2 segments. Finer ones alias in the LOD stage itself (its lines step over them),
 # which no sampling of the render patches can repair; they are outside this property.
-# Derandomized, so that CI sees the same examples every run: a random one (egg crate a 0.4375,
-# k 5.75, m 1, elevation 1.25, azimuth 4, distance 2.5) leaves 6 holes where the relief folds, in
-# the code before hybrid anti-aliasing too; an open bug, not a flaky CI (docs/points.md).
-@settings(max_examples=14, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+# A random example (egg crate a 0.4375, k 5.75, m 1, elevation 1.25, azimuth 4, distance 2.5)
+# leaves 6 holes where the relief folds: an open bug (docs/points.md); the examples are drawn
+# derandomized (tests/conftest.py), so CI checks the same ones every run.
+@settings(max_examples=14, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(disc=st.booleans(), a=st.floats(0.1, 0.5), k=st.floats(1.0, 6.0), m=st.floats(0.5, 3.0),
        elevation=st.floats(0.15, 1.45), azimuth=st.floats(0, 2 * np.pi), dist=st.floats(1.8, 3.2))
 def test_steep_smooth_surfaces_have_no_holes_inside_their_silhouettes(disc, a, k, m, elevation, azimuth, dist):
