@@ -51,6 +51,14 @@ inline ulong aux_key(float depth, float3 n_world, uint object_id) {
     return ((ulong)as_uint(depth) << 32) | ((ulong)oct10(n_world) << 12) | (ulong)(object_id & 0xFFFu);
 }
 
+// Early depth before shading: true when the colour key at `pix` already holds a strictly nearer
+// depth. Then a sample at `depth` loses both atom_mins whatever its shade (the sample that wrote
+// that depth writes an aux key of the same depth, so the aux key's depth ends no larger), and
+// skipping it leaves the frame's keys bit for bit.
+inline bool key_hidden(__global const ulong* color_buf, uint pix, float depth) {
+    return (uint)(color_buf[pix] >> 32) < as_uint(depth);
+}
+
 // atom_min both keys, reading first so that hidden samples cost no atomic (early depth).
 // Returns 1 when the colour atomic was issued.
 inline uint write_point(__global ulong* color_buf, __global ulong* aux_buf, uint pix, ulong key, ulong aux) {

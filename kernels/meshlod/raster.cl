@@ -214,9 +214,7 @@ inline uint rs_fragment(const RsTri* t, long E0, long E1, long E2, int x, int y,
     *covered += 1;
     uint iw = (uint)cam[CAM_W];
     uint pix = layer + (uint)y * iw + (uint)x;
-    // early depth: a nearer key is there already (the aux key's depth is never larger than the
-    // colour key's), so this fragment's keys cannot win whatever its shade
-    if ((uint)(color_buf[pix] >> 32) < as_uint(depth)) return 0u;
+    if (key_hidden(color_buf, pix, depth)) return 0u;
     float r = 1.0f / q;
     float3 h = ((u0 * t->e[0] + u1 * t->e[1]) + u2 * t->e[2]) * r;
     float3 nv = ((u0 * t->n[0] + u1 * t->n[1]) + u2 * t->n[2]) * r;

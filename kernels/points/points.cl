@@ -132,14 +132,16 @@ inline int point_position(uint func, __global const float* P, __global const flo
     return SAMPLE_DRAWN;
 }
 
-// Transform, clip and shade one evaluated sample for one view: ``world`` its position and
-// ``n_obj`` its (unnormalised) normal after the instance transform. On SAMPLE_DRAWN, (*fx, *fy)
-// is its screen position in pixels (inside the image), *key its colour key and *aux its
-// attribute key. A multi-view frame calls it once per view with that view's camera record.
-inline int point_view(float3 world, float3 n_obj, __global const float* cam, float4 mat,
-                      __global const float* light, uint object_id, float* fx, float* fy, ulong* key, ulong* aux) {
-    __global const float* V = cam + CAM_VIEW;
-    float3 e = xform_point(V, world);
+// Where one evaluated sample (``world``, after the instance transform) lands in one view:
+// SAMPLE_CLIPPED outside its depth range or image, else SAMPLE_DRAWN with its view-space
+// position, view depth and screen position in pixels (inside the image).
+typedef struct {
+    float3 e;
+    float depth, x, y;
+} Placed;
+
+inline int point_place(float3 world, __global const float* cam, Placed* p) {
+    float3 e = xform_point(cam + CAM_VIEW, world);
     float depth = -e.z;
     if (!(depth >= cam[CAM_NEAR] && depth <= cam[CAM_FAR])) return SAMPLE_CLIPPED;
     float W = cam[CAM_W], H = cam[CAM_H];
@@ -147,16 +149,34 @@ inline int point_view(float3 world, float3 n_obj, __global const float* cam, flo
     float x = (c.x / c.w * 0.5f + 0.5f) * W;
     float y = (0.5f - c.y / c.w * 0.5f) * H;
     if (!(x >= 0.0f && y >= 0.0f && x < W && y < H)) return SAMPLE_CLIPPED;
+    p->e = e; p->depth = depth; p->x = x; p->y = y;
+    return SAMPLE_DRAWN;
+}
+
+// The keys of a placed sample: ``n_obj`` its (unnormalised) normal after the instance transform,
+// shaded; *key its colour key and *aux its attribute key.
+inline void point_keys(Placed p, float3 n_obj, __global const float* cam, float4 mat,
+                       __global const float* light, uint object_id, ulong* key, ulong* aux) {
+    __global const float* V = cam + CAM_VIEW;
     float3 n_view = xform_dir(V, n_obj);
     float3 n;
-    uint rgba = shade(n_view, view_dir(cam, e), mat, light, &n);
+    uint rgba = shade(n_view, view_dir(cam, p.e), mat, light, &n);
     // the AOV normal is in world space: view -> world is the transpose of the view rotation
     float3 n_world = (float3)(V[0] * n.x + V[4] * n.y + V[8] * n.z,
                               V[1] * n.x + V[5] * n.y + V[9] * n.z,
                               V[2] * n.x + V[6] * n.y + V[10] * n.z);
-    *fx = x; *fy = y;
-    *key = color_key(depth, rgba);
-    *aux = aux_key(depth, n_world, object_id);
+    *key = color_key(p.depth, rgba);
+    *aux = aux_key(p.depth, n_world, object_id);
+}
+
+// Transform, clip and shade one evaluated sample for one view (point_place, then point_keys):
+// on SAMPLE_DRAWN, (*fx, *fy) is its screen position in pixels, *key and *aux its keys.
+inline int point_view(float3 world, float3 n_obj, __global const float* cam, float4 mat,
+                      __global const float* light, uint object_id, float* fx, float* fy, ulong* key, ulong* aux) {
+    Placed p;
+    if (point_place(world, cam, &p) != SAMPLE_DRAWN) return SAMPLE_CLIPPED;
+    point_keys(p, n_obj, cam, mat, light, object_id, key, aux);
+    *fx = p.x; *fy = p.y;
     return SAMPLE_DRAWN;
 }
 
@@ -305,15 +325,19 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                 // whose frustum holds the sample
                 for (ulong left = seen; left != 0ul; left &= left - 1ul) {
                     uint view = 63u - (uint)clz(left & (~left + 1ul));   // the lowest view left
-                    float fx, fy;
+                    __global const float* cv = cam + view * CAM_FLOATS;
+                    Placed p;
+                    if (point_place(world, cv, &p) != SAMPLE_DRAWN) continue;
+                    uint pix = view * layer_pixels + (uint)p.y * W + (uint)p.x;
+#ifndef PL_RECORD   // the hook records every sample's key
+                    if (key_hidden(color_buf, pix, p.depth)) continue;
+#endif
                     ulong key, aux;
-                    if (point_view(world, n_obj, cam + view * CAM_FLOATS, mat, light, object_id,
-                                   &fx, &fy, &key, &aux) != SAMPLE_DRAWN) continue;
-                    uint pix = (uint)fy * W + (uint)fx;
+                    point_keys(p, n_obj, cv, mat, light, object_id, &key, &aux);
 #ifdef PL_RECORD
                     if (view == 0u) { rec_pix[rec_offset[pid] + j] = pix; rec_key[rec_offset[pid] + j] = key; }
 #endif
-                    n_atomics += write_point(color_buf, aux_buf, view * layer_pixels + pix, key, aux);
+                    n_atomics += write_point(color_buf, aux_buf, pix, key, aux);
                 }
             }
             place++;

@@ -92,14 +92,15 @@ inline void sf_splat_view(float3 p, float3 n_obj, float4 mat, __global const flo
             if (!(sf_dot(dh, dh) <= r2)) continue;
             float depth = -h.z;
             if (!(depth >= near && depth <= far)) continue;
+            covered++;
+            uint pix = layer + (uint)y * iw + (uint)x;
+            if (key_hidden(color_buf, pix, depth)) continue;
             float3 nn;
             uint rgba = shade(nv, view_dir(cam, h), mat, light, &nn);
             float3 n_world = (float3)(V[0] * nn.x + V[4] * nn.y + V[8] * nn.z,
                                       V[1] * nn.x + V[5] * nn.y + V[9] * nn.z,
                                       V[2] * nn.x + V[6] * nn.y + V[10] * nn.z);
-            covered++;
-            issued += write_point(color_buf, aux_buf, layer + (uint)y * iw + (uint)x,
-                                  color_key(depth, rgba), aux_key(depth, n_world, object_id));
+            issued += write_point(color_buf, aux_buf, pix, color_key(depth, rgba), aux_key(depth, n_world, object_id));
         }
     }
     atom_add(&counters[0], (ulong)1);

@@ -21,6 +21,49 @@ def test_key_buffer_equals_minimum_at_over_the_same_samples():
     np.testing.assert_array_equal(color, expect)
 
 
+def test_early_depth_before_shading_keeps_every_key():
+    """points_direct skips shading a sample whose pixel already holds a strictly nearer depth
+    (kernels/points/points.cl); the recording hook draws without that test. Five tori one behind
+    the other: most samples are hidden, and both renders leave the same colour and aux keys."""
+    import pyopencl.array as cla
+
+    from paramlod.device.context import cl_device
+    from paramlod.renderers.points import DirectPointRenderer, grid_counts
+    from paramlod.renderers.targets import KeyBuffer
+    from helpers.stages import ParametricStage as renderer_for
+
+    scene = pl.Scene()
+    for k in range(5):
+        scene.add("torus", transform=pl.translate(0.1 * k, 0.05 * k, -0.6 * k) @ pl.rotate(20 * k, (1, 0, 0)),
+                  material=pl.Material(color=(0.2 * k, 0.5, 0.9 - 0.15 * k)))
+    cam = pl.Camera.look_at((0.4, 0.3, 3.0), (0.2, 0.1, -1.2), size=(120, 96))
+    settings = pl.PointSettings()
+    r = renderer_for(scene)
+    dev = r.upload(scene, cam)
+    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings())
+    nu, nv = grid_counts(r.lod.read_render_list(n), settings)
+    counts = nu * nv
+    q = cl_device().queue
+    off = cla.to_device(q, np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32))
+    pix, key = cla.empty(q, int(counts.sum()), np.uint32), cla.empty(q, int(counts.sum()), np.uint64)
+    drawn = []
+    for record in (False, True):
+        keys = KeyBuffer(*cam.size)
+        keys.clear()
+        DirectPointRenderer(scene.functions(), record=record).draw(
+            rbuf, n, dev["inst"], dev["materials"], dev["cam"], dev["light"], keys, settings,
+            record_args=(off.data, pix.data, key.data) if record else ())
+        drawn.append(keys.read_keys())
+    (color, aux), (color_all, aux_all) = drawn
+    np.testing.assert_array_equal(color, color_all)
+    np.testing.assert_array_equal(aux, aux_all)
+    # most drawn samples lie behind their pixel's final depth: the test had work to skip
+    p, k = pix.get(), key.get()
+    kept = p != 0xFFFFFFFF
+    hidden = (k[kept] >> np.uint64(32)) > (color_all.reshape(-1)[p[kept]] >> np.uint64(32))
+    assert hidden.mean() > 0.5
+
+
 @pytest.mark.parametrize("dist", [2.2, 2.6, 9.0])
 def test_sphere_silhouette_and_no_holes(dist):
     scene = pl.Scene()
