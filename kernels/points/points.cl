@@ -262,8 +262,9 @@ __kernel void points_schedule(__global const RenderPatch* patches, __global cons
     }
 }
 
-// Samples written straight into the shared key buffers with early depth (write_point reads
-// before it issues an atom_min).
+// Samples written straight into the shared key buffers with early depth twice: a sample is
+// shaded only if key_hidden finds nothing nearer in its pixel, and write_point reads again
+// before it issues an atom_min.
 __kernel __attribute__((reqd_work_group_size(POINTS_LOCAL, 1, 1)))
 void points_direct(__global const RenderPatch* patches, __global const ulong* order,
                    __global const float* inst_f, __global const uint* inst_u,
