@@ -1,9 +1,15 @@
 import numpy as np
+import pyopencl.array as cla
 import pytest
 from hypothesis import settings
 
 import paramlod as pl
+from paramlod.device.context import cl_device
+from paramlod.renderers.points import DirectPointRenderer, grid_counts
+from paramlod.renderers.targets import KeyBuffer
 from paramlod.scene import loaders
+
+from helpers.stages import ParametricStage as renderer_for
 
 # Hypothesis draws the same examples on every run, so a CI result does not depend on luck (a random
 # example once found a known open bug, docs/points.md); the properties are unchanged.
@@ -53,13 +59,6 @@ def record_direct_points(settings, size):
     Returns (stats, colour keys flattened, each sample's pixel (~0 when dropped, NOT_VISITED if
     the renderer never reached it), each sample's colour key, the sample count the numpy twin of
     the sample counts predicts)."""
-    import pyopencl.array as cla
-
-    from paramlod.device.context import cl_device
-    from paramlod.renderers.targets import KeyBuffer
-    from paramlod.renderers.points import DirectPointRenderer, grid_counts
-    from helpers.stages import ParametricStage as renderer_for
-
     scene = pl.Scene()
     scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
     scene.add("torus", transform=pl.translate(0.8, 0.2, 0.3) @ pl.rotate(70, (1, 0, 0)))

@@ -26,10 +26,7 @@ flat in uint ms_view_index;   // the view (layer) the geometry stage drew the tr
 #define PL_VIEW_MATRIX u_view
 #endif
 
-layout(location = 0) out vec4 out_color;
-layout(location = 1) out float out_depth;
-layout(location = 2) out vec4 out_normal;
-layout(location = 3) out uint out_object;
+#include "common/targets.glsl"
 
 uniform vec4 u_light;   // the light record: towards the light in view space (xyz), ambient share (w)
 uniform int u_rows;     // the target's height in pixels (subsamples with SSAA), for rows from the top

@@ -27,10 +27,7 @@ uniform sampler2D u_zbuf;
 #define PL_FETCH(t, q) texelFetch(t, q, 0)
 #endif
 
-layout(location = 0) out vec4 out_color;
-layout(location = 1) out float out_depth;
-layout(location = 2) out vec4 out_normal;
-layout(location = 3) out uint out_object;
+#include "common/targets.glsl"
 
 void main() {
     ivec2 q = ivec2(gl_FragCoord.xy) / PL_RATIO;

@@ -12,10 +12,7 @@ centroid in float te_bad;
 flat in vec4 te_material;
 flat in uint te_object;
 
-layout(location = 0) out vec4 out_color;
-layout(location = 1) out float out_depth;
-layout(location = 2) out vec4 out_normal;
-layout(location = 3) out uint out_object;
+#include "common/targets.glsl"
 
 uniform vec4 u_light;   // the light record: towards the light in view space (xyz), ambient share (w)
 uniform int u_tier;     // -1: the material's colour; else the tier the patches drawn belong to

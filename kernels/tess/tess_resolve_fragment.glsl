@@ -52,10 +52,7 @@ uniform sampler2D u_color;
 #define PL_COLOR(q) texelFetch(u_color, q, 0)
 #endif
 
-layout(location = 0) out vec4 out_color;
-layout(location = 1) out float out_depth;
-layout(location = 2) out vec4 out_normal;
-layout(location = 3) out uint out_object;
+#include "common/targets.glsl"
 
 void main() {
     ivec2 p = ivec2(gl_FragCoord.xy);

@@ -1,11 +1,19 @@
 """Direct point renderer: the 64-bit buffer against np.minimum.at, silhouettes, holes, NaN."""
+import re
+
 import numpy as np
+import pyopencl.array as cla
 import pytest
 import sympy as sp
 
 import paramlod as pl
+from paramlod.core.layouts import cl_prelude
+from paramlod.device.context import cl_device
+from paramlod.renderers.points import DirectPointRenderer, grid_counts
+from paramlod.renderers.targets import KeyBuffer
 
 from conftest import NOT_VISITED, iou, record_direct_points, sphere_disc
+from helpers.stages import ParametricStage as renderer_for
 
 
 def test_key_buffer_equals_minimum_at_over_the_same_samples():
@@ -25,13 +33,6 @@ def test_early_depth_before_shading_keeps_every_key():
     """points_direct skips shading a sample whose pixel already holds a strictly nearer depth
     (kernels/points/points.cl); the recording hook draws without that test. Five tori one behind
     the other: most samples are hidden, and both renders leave the same colour and aux keys."""
-    import pyopencl.array as cla
-
-    from paramlod.device.context import cl_device
-    from paramlod.renderers.points import DirectPointRenderer, grid_counts
-    from paramlod.renderers.targets import KeyBuffer
-    from helpers.stages import ParametricStage as renderer_for
-
     scene = pl.Scene()
     for k in range(5):
         scene.add("torus", transform=pl.translate(0.1 * k, 0.05 * k, -0.6 * k) @ pl.rotate(20 * k, (1, 0, 0)),
@@ -147,10 +148,6 @@ def test_srgb_encoding_table_rounds_the_srgb_curve():
     """keys.cl encodes colour by searching SRGB8_THRESHOLDS (emitted into the OpenCL prelude by
     paramlod.core.color); the table must give the code that rounding the exact sRGB curve gives
     (checked away from the code boundaries)."""
-    import re
-
-    from paramlod.core.layouts import cl_prelude
-
     src = cl_prelude()
     body = src[src.index("SRGB8_THRESHOLDS[256] = {"):]
     t = np.array([float(x) for x in re.findall(r"-?\d+\.\d+(?:e-?\d+)?", body[:body.index("};")])])

@@ -43,6 +43,7 @@ import numpy as np
 
 from paramlod.app.args import positive_float
 from paramlod.app.bench.mesh_eval import flip
+from paramlod.app.bench.plots import pyplot, save_figure
 from paramlod.app.bench.scenes import SCENARIOS
 from paramlod.core.camera import Camera
 from paramlod.errors import ParamlodError
@@ -415,12 +416,8 @@ def format_hybrid(result: dict) -> list[str]:
 
 def plot_hybrid(result: dict, out: Path) -> list[Path]:
     """Per scene: FPS and FLIP against distance for every variant; [] without matplotlib."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         return []
     paths = []
     for name, sc in result["scenes"].items():
@@ -442,11 +439,7 @@ def plot_hybrid(result: dict, out: Path) -> list[Path]:
         a.set_title(f"{name}: FPS")
         b.set_title(f"{name}: FLIP ({sc['reference']['label']})", fontsize=9)
         fig.suptitle(f"hybrid AA, {result['size'][0]}x{result['size'][1]}", fontsize=9)
-        fig.tight_layout()
-        p = Path(out) / f"hybrid_{name}.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
-        paths.append(p)
+        paths.append(save_figure(fig, Path(out) / f"hybrid_{name}.png"))
     return paths
 
 

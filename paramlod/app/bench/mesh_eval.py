@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from paramlod.app.bench.meshes import bench_meshes, grid_cameras, grid_scene, normalizing, path_cameras
+from paramlod.app.bench.plots import pyplot, save_figure
 from paramlod.core.camera import Camera
 from paramlod.errors import MeshError, ParamlodError
 from paramlod.meshlod.buffers import MeshArrays
@@ -406,12 +407,8 @@ def format_mesh_eval(res: dict) -> list[str]:
 def plot_mesh_eval(res: dict, out: Path) -> list[Path]:
     """Per mesh: frame ms against threshold (per scenario), FLIP against frame ms, and bytes per
     representation; [] without matplotlib."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         return []
     paths = []
     colours = {"full": "0.3", "chain": "tab:orange", "dag": "tab:blue"}
@@ -456,9 +453,5 @@ def plot_mesh_eval(res: dict, out: Path) -> list[Path]:
         c.set_title("memory per representation")
         c.legend(fontsize=7)
         fig.suptitle(f"{m['mesh']} ({m['triangles']:,} triangles), {res['size'][0]}x{res['size'][1]}", fontsize=9)
-        fig.tight_layout()
-        p = Path(out) / f"mesh_eval_{m['mesh']}.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
-        paths.append(p)
+        paths.append(save_figure(fig, Path(out) / f"mesh_eval_{m['mesh']}.png"))
     return paths

@@ -37,6 +37,7 @@ from paramlod.app.bench.mesh_eval import SCENARIOS as EVAL_SCENARIOS, THRESHOLDS
 from paramlod.app.bench.mesh_eval import format_mesh_eval, plot_mesh_eval, run_mesh_eval
 from paramlod.app.bench.meshes import format_meshes, run_meshes
 from paramlod.app.bench.multiview import SCENES as MULTIVIEW_SCENES, VIEW_SETS, format_multiview, run_multiview
+from paramlod.app.bench.plots import pyplot, save_figure
 from paramlod.app.bench.peers import add_arguments as add_peers_arguments, format_peers_markdown, run_peers
 from paramlod.app.bench.skinned import format_skinned, run_skinned
 from paramlod.app.bench.viewer import format_viewer, run_viewer
@@ -483,12 +484,8 @@ def format_culling(scenarios: dict) -> list[str]:
 def make_plots(result, out: Path) -> list[Path]:
     """FPS against distance per scenario, and patches per LOD step at the nearest distance; the
     mesh-LOD evaluation's plots (paramlod.app.bench.mesh_eval.plot_mesh_eval)."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         print("matplotlib is not installed: no plots (pip install 'paramlod[bench]')")
         return []
     paths = []
@@ -510,11 +507,7 @@ def make_plots(result, out: Path) -> list[Path]:
             b.set_ylabel("patches evaluated")
             b.set_title(f"patches per LOD step (distance {near['distance']})")
         fig.suptitle(f"{result['device']}, {result['size'][0]}x{result['size'][1]}", fontsize=9)
-        fig.tight_layout()
-        p = out / f"{name}.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
-        paths.append(p)
+        paths.append(save_figure(fig, out / f"{name}.png"))
     if "mesh_eval" in result:
         paths += plot_mesh_eval(result["mesh_eval"], out)
     if "hybrid" in result:
