@@ -74,8 +74,13 @@ from paramlod.scene.scene import Scene
 
 # Highest tessellation level allowed: GL_MAX_TESS_GEN_LEVEL is at least 64 on every GL 4.x device.
 MAX_LEVEL = 64.0
-# llvmpipe: worst-case generated vertices per draw call (see TessRenderer.patches_per_draw)
-LLVMPIPE_VERTEX_BUDGET = 60000
+# llvmpipe: most vertices a draw call may generate, bounded from above per patch (draw_batches).
+# Below 65,536, past which Mesa's llvmpipe silently drops triangles; and small, because llvmpipe's
+# draw module resets every vertex of the draw each time it flushes clipped triangles, a cost that
+# grows with the square of the draw's vertices: the close-up torus (peers bench, 640 x 640, 2-core
+# AMD EPYC, Mesa 22.3) drew in 1,248 ms with 60,000 (9 draws) and in 103 ms with 4,000 (138); the
+# framed torus and the glyph fields, mostly unclipped, drew as fast with either
+LLVMPIPE_VERTEX_BUDGET = 4000
 SPACINGS = {"equal": "equal_spacing", "fractional_odd": "fractional_odd_spacing"}
 # the render list's records as vertex attributes: range, ext and inst of each RenderPatch
 PATCH_ATTRIBUTES = ("range", "ext", "inst")
@@ -232,6 +237,23 @@ def view_chunks(n_views: int, most: int = MAX_INVOCATIONS) -> tuple[int, int]:
     return -(-n_views // draws), draws
 
 
+def vertex_bound(ext: np.ndarray, settings: TessSettings, threshold) -> np.ndarray:
+    """An upper bound on the vertices the tessellator generates for each patch, from its
+    extents ``ext`` (the render records' e_u, e_v): the control stage's inner levels, each
+    rounded up to the next integer and one more (fractional odd spacing rounds up to odd), on a
+    grid of that many segments per side, and four outer edges of at most ``l_max``."""
+    if settings.mode == "fixed":
+        inner, outer = (np.full(len(ext), float(x)) for x in settings.levels)
+        lu = lv = inner
+    else:
+        L = float(settings.base_level)
+        lu, lv = (np.clip(np.nan_to_num(ext[:, a] * L / min(float(t), L), nan=settings.l_min),
+                          settings.l_min, settings.l_max) for a, t in ((0, threshold[0]), (1, threshold[1])))
+        outer = np.full(len(ext), float(settings.l_max))
+    su, sv, so = (np.ceil(x) + 1.0 for x in (lu, lv, outer))
+    return ((su + 1.0) * (sv + 1.0) + 4.0 * (so + 1.0)).astype(np.int64)
+
+
 # --- the renderer -------------------------------------------------------------------------------
 class TessRenderer:
     """Compiled programs and reusable GL buffers and targets for one set of functions."""
@@ -268,16 +290,24 @@ class TessRenderer:
         """(requested, effective, warnings): the multisample count capped to the device."""
         return effective_aa(self.ctx, mode)
 
-    def patches_per_draw(self, settings: TessSettings) -> int:
-        """Patches per draw call. One call draws everything, except on Mesa's llvmpipe, which
-        silently drops triangles once a single tessellated draw generates more than about 65,536
-        vertices (seen with Mesa 22.3): there the list is drawn in batches whose worst-case vertex
-        count stays below that."""
+    def draw_batches(self, patches: np.ndarray, settings: TessSettings, threshold) -> list[tuple[int, int]]:
+        """(first, count) of each draw call for the render records ``patches``, drawn with the
+        effective thresholds ``threshold``. One call draws everything, except on Mesa's llvmpipe
+        (see LLVMPIPE_VERTEX_BUDGET): there consecutive runs of patches whose bound on generated
+        vertices (``vertex_bound``) stays within the budget, one patch at least."""
+        n = len(patches)
+        if not n:
+            return []
         if "llvmpipe" not in str(self.ctx.info.get("GL_RENDERER", "")).lower():
-            return 1 << 30
-        top = max(settings.levels) if settings.mode == "fixed" else settings.l_max
-        side = int(math.ceil(top)) + 2           # vertices per row, fractional spacing included
-        return max(1, LLVMPIPE_VERTEX_BUDGET // (side * side + 4 * side))
+            return [(0, n)]
+        ends = np.cumsum(vertex_bound(patches["ext"], settings, threshold))
+        batches, first = [], 0
+        while first < n:
+            base = ends[first - 1] if first else 0
+            last = max(first + 1, int(np.searchsorted(ends, base + LLVMPIPE_VERTEX_BUDGET, side="right")))
+            batches.append((first, last - first))
+            first = last
+        return batches
 
     def _targets_for(self, size, ss, samples) -> GLTargets:
         t, self._targets = self._targets, None   # not kept when making new ones fails
@@ -400,22 +430,22 @@ class TessRenderer:
             "warnings": notes,
         }
 
-    def _draw_list(self, prog, n, settings, passes=(None,), before=None, start=0):
-        """Draw ``n`` uploaded patches from record ``start`` on with ``prog`` once per pass
-        (``before(pass)`` sets each up); returns (a primitives query per pass, none without
-        patches; draw calls)."""
+    def _draw_list(self, prog, patches, settings, threshold, passes=(None,), before=None, start=0):
+        """Draw the uploaded records ``patches`` (from record ``start`` on) with ``prog`` and the
+        thresholds ``threshold`` once per pass (``before(pass)`` sets each up); returns (a
+        primitives query per pass, none without patches; draw calls)."""
         queries, draw_calls = [], 0
-        if n:
+        batches = self.draw_batches(patches, settings, threshold)
+        if batches:
             self.ctx.patch_vertices = 1
-            batch = self.patches_per_draw(settings)
             vao = self._vao(prog)
             for p in passes:
                 if before is not None:
                     before(p)
                 queries.append(self.ctx.query(primitives=True))
                 with queries[-1]:
-                    for first in range(start, start + n, batch):
-                        vao.render(mode=moderngl.PATCHES, vertices=min(batch, start + n - first), first=first)
+                    for first, count in batches:
+                        vao.render(mode=moderngl.PATCHES, vertices=count, first=start + first)
                         draw_calls += 1
         return queries, draw_calls
 
@@ -482,9 +512,10 @@ class TessRenderer:
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         queries, draw_calls, start = [], 0, 0
         for k, count in enumerate(counts):
+            thr = (tu / DETAIL_DIVISORS[k], tv / DETAIL_DIVISORS[k])
             if k:
-                set_uniform(prog, "u_threshold", (tu / DETAIL_DIVISORS[k], tv / DETAIL_DIVISORS[k]))
-            q, calls = self._draw_list(prog, int(count), settings, start=start)
+                set_uniform(prog, "u_threshold", thr)
+            q, calls = self._draw_list(prog, render_list[start:start + int(count)], settings, thr, start=start)
             queries, draw_calls, start = queries + q, draw_calls + calls, start + int(count)
         triangles = sum(int(q.primitives) for q in queries)
         ctx.finish()
@@ -536,7 +567,8 @@ class TessRenderer:
         finest = self._tier_targets_for(drawn[-1], (w, h), modes)
         targets = {k: finest if k in shared else self._tier_targets_for(k, (w, h), modes) for k in drawn}
         t1 = time.perf_counter()
-        self._upload(render_list[:n][np.argsort(tier, kind="stable")], n, scene)
+        ordered = render_list[:n][np.argsort(tier, kind="stable")]
+        self._upload(ordered, n, scene)
         t2 = time.perf_counter()
 
         set_uniform(prog, "u_view", gl_matrix(camera.view))
@@ -561,7 +593,9 @@ class TessRenderer:
                 set_uniform(prog, "u_tier", k)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
-            queries, calls = self._draw_list(prog, int(counts[k]), settings, start=int(starts[k]))
+            first = int(starts[k])
+            queries, calls = self._draw_list(prog, ordered[first:first + int(counts[k])], settings,
+                                             tuple(tiers[k]["threshold"]), start=first)
             tiers[k]["triangles"] = sum(int(q.primitives) for q in queries)
             draw_calls += calls
             ctx.finish()
@@ -637,7 +671,7 @@ class TessRenderer:
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         set_uniform(prog, "u_n_views", n_views)
         self._views.bind_to_uniform_block(0)
-        queries, draw_calls = self._draw_list(prog, n, settings, range(0, n_views, invocations),
+        queries, draw_calls = self._draw_list(prog, render_list[:n], settings, (tu, tv), range(0, n_views, invocations),
                                               lambda base: set_uniform(prog, "u_view_base", base))
         ctx.finish()
         t3 = time.perf_counter()

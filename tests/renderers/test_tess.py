@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import sympy as sp
 from conftest import iou, sphere_disc
+from helpers.stages import ParametricStage
 
 import paramlod as pl
 from paramlod.pipeline.composite import composite
@@ -19,6 +20,7 @@ from paramlod.lod.stage import LodSettings
 from paramlod.lod.patches import RENDER_DTYPE
 from paramlod.function.probes import glsl_surface
 from paramlod.function.registry import all_functions, get_function
+from paramlod.renderers import tess
 from paramlod.renderers.tess import AAMode, TessRenderer, TessSettings, lod_divisor, parse_aa
 
 
@@ -249,6 +251,39 @@ def test_equal_patches_watertight_without_overlap():
     assert np.all(f.coverage[inner])
     spread = local_range(np.where(disc, depth, np.nan))
     assert np.all(np.abs(f.depth[inner] - depth[inner]) <= spread[inner] + 2e-3 * depth[inner])
+
+
+def test_small_draw_batches_draw_the_same_frame(monkeypatch):
+    """On llvmpipe the render list is drawn in runs whose bound on generated vertices stays within
+    LLVMPIPE_VERTEX_BUDGET (a large draw of clipped triangles is slow there, and one past 65,536
+    vertices loses triangles). A close-up torus, partly outside the frame (clipped triangles), drawn
+    with that budget and with one ten times larger: the same triangles, pixels and depths, and the
+    runs cover every patch once, in order, each within the budget unless it is a single patch."""
+    scene = pl.Scene()
+    scene.add("torus")
+    cam = pl.Camera.look_at((0.35, 0.45, 0.3), (0, 0, 0), size=(96, 96), near=0.05)
+    small = render_tess(scene, cam)
+    monkeypatch.setattr(tess, "LLVMPIPE_VERTEX_BUDGET", 10 * tess.LLVMPIPE_VERTEX_BUDGET)
+    large = render_tess(scene, cam)
+    assert small.stats["triangles"] == large.stats["triangles"] > 0
+    assert np.array_equal(small.color, large.color) and np.array_equal(small.depth, large.depth)
+    monkeypatch.undo()
+
+    settings = TessSettings()
+    threshold = small.stats["threshold"]
+    stage = ParametricStage(scene)
+    dev = stage.upload(scene, cam)
+    n = stage.lod.run(dev["inst"], dev["domains"], dev["cam"], LodSettings(threshold=tuple(threshold)))[1]
+    records = stage.lod.read_render_list(n)
+    r = TessRenderer(scene.functions())
+    batches = r.draw_batches(records, settings, threshold)
+    assert [first for first, _ in batches] == list(np.cumsum([0] + [c for _, c in batches])[:-1])
+    assert sum(c for _, c in batches) == n
+    if "llvmpipe" in str(r.ctx.info["GL_RENDERER"]).lower():
+        bound = tess.vertex_bound(records["ext"], settings, threshold)
+        assert len(batches) > 1
+        for first, count in batches:
+            assert count == 1 or bound[first:first + count].sum() <= tess.LLVMPIPE_VERTEX_BUDGET
 
 
 def test_nan_vertices_are_dropped_and_counted():
