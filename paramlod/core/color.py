@@ -1,9 +1,9 @@
 """sRGB, the one copy: the transfer curve on the host (numpy only) and what the device gets of it.
 
 The device reads everything of sRGB from here: ``cl_tables()`` (part of the OpenCL prelude,
-``paramlod.core.layouts.cl_prelude``) emits the curve's constants (``PL_SRGB_*``: the pow decode of
-kernels/points/resolve.cl) and ``srgb8_thresholds()`` as the ``SRGB8_THRESHOLDS`` table that
-``srgb8()`` in kernels/common/keys.cl searches; ``srgb_tables()`` are uploaded for the integer
+``paramlod.core.layouts.cl_prelude``) emits ``srgb8_decoded()`` as the ``SRGB8_DECODED`` table
+that the resolve in kernels/points/resolve.cl looks codes up in, and ``srgb8_thresholds()`` as the
+``SRGB8_THRESHOLDS`` table that ``srgb8()`` in kernels/common/keys.cl searches; ``srgb_tables()`` are uploaded for the integer
 encoder ``encode_srgb8`` in kernels/points/subsamples.cl (paramlod.renderers.targets). The
 tessellation shaders write linear colour; the host encodes it (``linear_to_srgb8``). The numpy
 twins of the kernels call the functions here.
@@ -84,20 +84,24 @@ def srgb8_thresholds() -> np.ndarray:
     return t
 
 
+def srgb8_decoded() -> np.ndarray:
+    """float32 [256]: the linear value of each sRGB 8-bit code (decoded in float64, rounded once).
+    The resolve looks codes up here instead of calling pow(x, 2.4) per channel: pow was a third of
+    a 640 x 640 resolve on PoCL (2-core AMD EPYC)."""
+    return srgb_to_linear(np.arange(256, dtype=np.float64) / 255.0).astype(np.float32)
+
+
 def _cl_float(x) -> str:
     """An OpenCL float literal that parses back to the same float32 (shortest round trip)."""
     return np.format_float_positional(np.float32(x), unique=True, trim="0") + "f"
 
 
 def cl_tables() -> str:
-    """The sRGB part of the OpenCL prelude: the curve's constants and SRGB8_THRESHOLDS."""
-    consts = [("PL_SRGB_DECODE_CUTOFF", SRGB_DECODE_CUTOFF), ("PL_SRGB_ENCODE_CUTOFF", SRGB_ENCODE_CUTOFF),
-              ("PL_SRGB_SLOPE", SRGB_SLOPE), ("PL_SRGB_OFFSET", SRGB_OFFSET), ("PL_SRGB_SCALE", SRGB_SCALE),
-              ("PL_SRGB_GAMMA", SRGB_GAMMA)]
-    lines = ["// sRGB (paramlod/core/color.py): the curve's constants and the encoder's thresholds"]
-    lines += [f"#define {name} {_cl_float(v)}" for name, v in consts]
-    t = [_cl_float(x) for x in srgb8_thresholds()]
-    lines.append("__constant float SRGB8_THRESHOLDS[256] = {")
-    lines += ["    " + ", ".join(t[i:i + 8]) + "," for i in range(0, 256, 8)]
-    lines.append("};")
+    """The sRGB part of the OpenCL prelude: SRGB8_DECODED and SRGB8_THRESHOLDS."""
+    lines = ["// sRGB (paramlod/core/color.py): each 8-bit code's linear value and the encoder's thresholds"]
+    for name, table in (("SRGB8_DECODED", srgb8_decoded()), ("SRGB8_THRESHOLDS", srgb8_thresholds())):
+        t = [_cl_float(x) for x in table]
+        lines.append(f"__constant float {name}[256] = {{")
+        lines += ["    " + ", ".join(t[i:i + 8]) + "," for i in range(0, 256, 8)]
+        lines.append("};")
     return "\n".join(lines)
