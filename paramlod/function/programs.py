@@ -2,8 +2,11 @@
 ``paramlod.device.programs``, which caches them)."""
 from __future__ import annotations
 
+from paramlod import kernels
 from paramlod.device import programs
 from paramlod.function.codegen_cl import cl_dispatch_source
+
+POLY_TRIG = "PL_POLY_TRIG"   # a define: the generated code's sin, cos and sincos inline (kernels/common/poly_trig.cl)
 
 
 def _generated(functions) -> tuple[str, str]:
@@ -13,13 +16,21 @@ def _generated(functions) -> tuple[str, str]:
     return cl_dispatch_source(functions), ", ".join(f"'{f.name}' ({f.source})" for f in functions)
 
 
+def _with_trig(generated: str, defines: dict | None) -> str:
+    """``generated`` with inline sin, cos and sincos where ``defines`` holds POLY_TRIG."""
+    if not generated or POLY_TRIG not in (defines or {}):
+        return generated
+    restore = [f"#undef {name}\n#pragma pop_macro(\"{name}\")" for name in ("sincos", "sin", "cos")]
+    return "\n".join([kernels.source("common/poly_trig.cl"), generated, *restore])
+
+
 def build(files: list[str], functions=(), defines: dict | None = None, options: tuple = ()):
     """Compile common.cl + the functions' generated code + ``files`` (paths in kernels/)."""
     generated, describe = _generated(functions)
-    return programs.build(files, defines, options, generated, describe)
+    return programs.build(files, defines, options, _with_trig(generated, defines), describe)
 
 
 def kernel(name: str, files: list[str], functions=(), defines: dict | None = None, options: tuple = ()):
     """A kernel object of ``build(files, functions, defines, options)``, retrieved once and reused."""
     generated, describe = _generated(functions)
-    return programs.kernel(name, files, defines, options, generated, describe)
+    return programs.kernel(name, files, defines, options, _with_trig(generated, defines), describe)

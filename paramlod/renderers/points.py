@@ -17,7 +17,7 @@ from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
-from paramlod.function.programs import build
+from paramlod.function.programs import POLY_TRIG, build
 
 LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
@@ -72,6 +72,8 @@ class DirectPointRenderer:
         defines = {"PL_RECORD": 1} if record else {}
         if cl_device().is_gpu:   # sum the counters per work-group (see the end of points_direct)
             defines["PL_GROUP_COUNTERS"] = 1
+        else:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
+            defines[POLY_TRIG] = 1
         # occlusion.cl shares the program: the function code is compiled once
         self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions, defines)
         # own kernel objects per list drawn in a frame (all patches, the two occlusion phases, the
