@@ -137,6 +137,7 @@ inline int point_position(uint func, __global const float* P, __global const flo
 // position, view depth and screen position in pixels (inside the image).
 typedef struct {
     float3 e;
+    float4 c;   // clip coordinates
     float depth, x, y;
 } Placed;
 
@@ -149,7 +150,7 @@ inline int point_place(float3 world, __global const float* cam, Placed* p) {
     float x = (c.x / c.w * 0.5f + 0.5f) * W;
     float y = (0.5f - c.y / c.w * 0.5f) * H;
     if (!(x >= 0.0f && y >= 0.0f && x < W && y < H)) return SAMPLE_CLIPPED;
-    p->e = e; p->depth = depth; p->x = x; p->y = y;
+    p->e = e; p->c = c; p->depth = depth; p->x = x; p->y = y;
     return SAMPLE_DRAWN;
 }
 
@@ -189,6 +190,91 @@ inline int point_eval(uint func, __global const float* P, __global const float* 
     *world = xform_point(I + INST_MODEL, pos);
     *n_obj = xform_dir(I + INST_NORMAL, cross(fu, fv));
     return SAMPLE_DRAWN;
+}
+
+// point_eval, also giving the partials df/du, df/dv after the instance transform (world space).
+inline int point_eval_partials(uint func, __global const float* P, __global const float* I, float u, float v,
+                               float3* world, float3* n_obj, float3* tu, float3* tv) {
+    float3 pos, fu, fv;
+    pl_surface(func, u, v, P, &pos, &fu, &fv);
+    if (is_bad3(pos)) return SAMPLE_NAN;
+    *world = xform_point(I + INST_MODEL, pos);
+    *n_obj = xform_dir(I + INST_NORMAL, cross(fu, fv));
+    *tu = xform_dir(I + INST_MODEL, fu);
+    *tv = xform_dir(I + INST_MODEL, fv);
+    return SAMPLE_DRAWN;
+}
+
+// Pixel-centre coverage (PointSettings.coverage "centre"; twin:
+// paramlod.renderers.sampling.cell_cover). A sample stands for its cell of the patch's grid: the
+// parameters from half-way to the previous sample to half-way to the next along u and v,
+// widened by COVER_MARGIN for the surface's curvature, mapped to the screen by the linearised
+// projection at the sample (its screen Jacobian from the partials). It covers the pixels whose
+// centres its cell holds, as a triangle covers the pixels whose centres it holds; neighbouring
+// cells tile the patch, so the points' silhouette is the surface's, not the surface grown by up
+// to a pixel as when a sample covers the pixel it lands in.
+#define COVER_MARGIN 1.2f    // cells overlap by a tenth of a step on each side
+#define COVER_REACH 2        // pixels from the sample's own that a cell may reach
+#define COVER_OWN 0x80000000u   // cover_cells: the cell is degenerate or too large; the own pixel
+
+// the screen-space image (pixels) of the world-space direction d at the placed sample p
+inline float2 screen_dir(__global const float* cam, Placed p, float3 d) {
+#pragma OPENCL FP_CONTRACT OFF
+    float3 de = xform_dir(cam + CAM_VIEW, d);
+    __global const float* M = cam + CAM_PROJ;
+    float dcx = M[0] * de.x + M[1] * de.y + M[2] * de.z, dcy = M[4] * de.x + M[5] * de.y + M[6] * de.z;
+    float dcw = M[12] * de.x + M[13] * de.y + M[14] * de.z;
+    float iw = 1.0f / p.c.w;
+    return (float2)(0.5f * cam[CAM_W] * ((dcx - p.c.x * iw * dcw) * iw),
+                    -0.5f * cam[CAM_H] * ((dcy - p.c.y * iw * dcw) * iw));
+}
+
+inline int ceil_small(float t) { int i = (int)t; return (float)i < t ? i + 1 : i; }
+inline int floor_small(float t) { int i = (int)t; return (float)i > t ? i - 1 : i; }
+
+// The pixel centres the cell [-lo.x, hi.x] x [-lo.y, hi.y] (parameter offsets along u, v) of the
+// sample placed at p holds, for screen Jacobian columns ju, jv: bit (dy + 2) * 5 + (dx + 2) for the
+// pixel (dx, dy) from the sample's own; COVER_OWN when the cell is degenerate (its Jacobian
+// singular: a silhouette seen edge-on, a pole) or reaches beyond COVER_REACH pixels (an
+// undersampled patch), where the sample covers its own pixel as before. Pixels outside the image
+// (W x H) are never set.
+inline uint cover_cells(Placed p, float2 ju, float2 jv, float2 lo, float2 hi, uint W, uint H) {
+#pragma OPENCL FP_CONTRACT OFF   // as its twin evaluates it
+    float det = ju.x * jv.y - ju.y * jv.x;
+    if (!(det * det > 1e-12f * (ju.x * ju.x + ju.y * ju.y) * (jv.x * jv.x + jv.y * jv.y))) return COVER_OWN;
+    // the cell's screen bounding box, relative to the sample
+    float ax0 = ju.x * -lo.x, ax1 = ju.x * hi.x, bx0 = jv.x * -lo.y, bx1 = jv.x * hi.y;
+    float ay0 = ju.y * -lo.x, ay1 = ju.y * hi.x, by0 = jv.y * -lo.y, by1 = jv.y * hi.y;
+    float xmin = (ax0 < ax1 ? ax0 : ax1) + (bx0 < bx1 ? bx0 : bx1), xmax = (ax0 < ax1 ? ax1 : ax0) + (bx0 < bx1 ? bx1 : bx0);
+    float ymin = (ay0 < ay1 ? ay0 : ay1) + (by0 < by1 ? by0 : by1), ymax = (ay0 < ay1 ? ay1 : ay0) + (by0 < by1 ? by1 : by0);
+    int px = (int)p.x, py = (int)p.y;
+    float fx = p.x - (float)px - 0.5f, fy = p.y - (float)py - 0.5f;   // the sample from its pixel's centre
+    float ex0 = fx + xmin, ex1 = fx + xmax, ey0 = fy + ymin, ey1 = fy + ymax;   // the box from that centre
+    const float reach = (float)(COVER_REACH + 1);   // no centre farther than COVER_REACH inside (NaN: out)
+    if (!(ex0 > -reach && ex1 < reach && ey0 > -reach && ey1 < reach)) return COVER_OWN;
+    int x0 = ceil_small(ex0), x1 = floor_small(ex1), y0 = ceil_small(ey0), y1 = floor_small(ey1);
+    float idet = 1.0f / det;
+    uint bits = 0u;
+    for (int dy = y0; dy <= y1; ++dy) {
+        for (int dx = x0; dx <= x1; ++dx) {
+            float qx = (float)dx - fx, qy = (float)dy - fy;   // the centre from the sample
+            float a = (qx * jv.y - qy * jv.x) * idet, b = (ju.x * qy - ju.y * qx) * idet;
+            bool inside = a >= -lo.x && a <= hi.x && b >= -lo.y && b <= hi.y
+                          && px + dx >= 0 && px + dx < (int)W && py + dy >= 0 && py + dy < (int)H;
+            if (inside) bits |= 1u << ((dy + COVER_REACH) * (2 * COVER_REACH + 1) + dx + COVER_REACH);
+        }
+    }
+    return bits;
+}
+
+// Half the parameter gaps to the previous and the next sample of a grid direction (the
+// cell_cover margin applied); a grid end takes the gap on its inner side for both.
+inline float2 cell_half(float x0, float x1, uint n, uint na, float a, float m, uint i) {
+    float x = grid_at(x0, x1, n, na, a, m, i);
+    float prev = i > 0u ? x - grid_at(x0, x1, n, na, a, m, i - 1u) : grid_at(x0, x1, n, na, a, m, 1u) - x;
+    float next = i + 1u < n ? grid_at(x0, x1, n, na, a, m, i + 1u) - x : prev;
+    if (i == 0u) prev = next;
+    return (float2)(prev, next) * (0.5f * COVER_MARGIN);
 }
 
 // Evaluate, transform, clip and shade one sample for one view (point_eval, then point_view).
@@ -264,14 +350,15 @@ __kernel void points_schedule(__global const RenderPatch* patches, __global cons
 
 // Samples written straight into the shared key buffers with early depth twice: a sample is
 // shaded only if key_hidden finds nothing nearer in its pixel, and write_point reads again
-// before it issues an atom_min.
+// before it issues an atom_min. `centre` (PointSettings.coverage "centre"): each sample covers
+// the pixels whose centres its cell holds (cover_cells) instead of the pixel it lands in.
 __kernel __attribute__((reqd_work_group_size(POINTS_LOCAL, 1, 1)))
 void points_direct(__global const RenderPatch* patches, __global const ulong* order,
                    __global const float* inst_f, __global const uint* inst_u,
                    __global const float* params, __global const float4* materials,
                    __global const float* cam, uint n_views, __global const ulong* view_masks,
                    __global const float* light,
-                   float factor, uint measure, float widen, uint max_side, uint color_by,
+                   float factor, uint measure, float widen, uint max_side, uint color_by, uint centre,
                    __global ulong* color_buf, __global ulong* aux_buf,
                    __global ulong* counters   // samples, atomics, NaN samples, capped patches, schedule
 #ifdef PL_RECORD
@@ -314,9 +401,11 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                 uint j = (c - first) * POINTS_LOCAL + get_local_id(0);
                 if (j >= total_here) continue;   // the patch's last chunk is partly empty
                 uint iu = j % g.nu, iv = j / g.nu;
-                float3 world, n_obj;
-                int r = point_eval(func, P, I, grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu),
-                                   grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv), &world, &n_obj);
+                float3 world, n_obj, tu, tv;
+                float us = grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
+                float vs = grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
+                int r = centre ? point_eval_partials(func, P, I, us, vs, &world, &n_obj, &tu, &tv)
+                               : point_eval(func, P, I, us, vs, &world, &n_obj);
                 n_samples++;
 #ifdef PL_RECORD
                 rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;
@@ -330,15 +419,34 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     Placed p;
                     if (point_place(world, cv, &p) != SAMPLE_DRAWN) continue;
                     uint pix = view * layer_pixels + (uint)p.y * W + (uint)p.x;
-#ifndef PL_RECORD   // the hook records every sample's key
-                    if (key_hidden(color_buf, pix, p.depth)) continue;
-#endif
+                    // the pixels it covers: its own, or (centre) those whose centres its cell holds
+                    uint cover = COVER_OWN;
+                    if (centre) {
+                        float2 hu = cell_half(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
+                        float2 hv = cell_half(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
+                        cover = cover_cells(p, screen_dir(cv, p, tu), screen_dir(cv, p, tv), (float2)(hu.x, hv.x),
+                                            (float2)(hu.y, hv.y), W, layer_pixels / W);
+                    }
+                    bool shaded = false;
                     ulong key, aux;
+#ifdef PL_RECORD   // the hook records every sample's own pixel and key
                     point_keys(p, n_obj, cv, mat, light, object_id, &key, &aux);
-#ifdef PL_RECORD
+                    shaded = true;
                     if (view == 0u) { rec_pix[rec_offset[pid] + j] = pix; rec_key[rec_offset[pid] + j] = key; }
 #endif
-                    n_atomics += write_point(color_buf, aux_buf, pix, key, aux);
+                    for (uint left = cover == COVER_OWN ? 1u : cover; left != 0u; left &= left - 1u) {
+                        uint q = pix;
+                        if (cover != COVER_OWN) {
+                            int k = 31 - (int)clz(left & (~left + 1u));   // the lowest bit left
+                            int dx = k % (2 * COVER_REACH + 1) - COVER_REACH, dy = k / (2 * COVER_REACH + 1) - COVER_REACH;
+                            q = (uint)((int)pix + dy * (int)W + dx);
+                        }
+#ifndef PL_RECORD
+                        if (key_hidden(color_buf, q, p.depth)) continue;
+#endif
+                        if (!shaded) { point_keys(p, n_obj, cv, mat, light, object_id, &key, &aux); shaded = true; }
+                        n_atomics += write_point(color_buf, aux_buf, q, key, aux);
+                    }
                 }
             }
             place++;

@@ -34,7 +34,7 @@ from paramlod.surfels.render import FixedCount, FixedSize
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation", "camera_path"}   # camera_path: docs/scale-out.md
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches", "patch_budget",
-               "detail_angle", "spot_angle", "spot_share", "color_by",
+               "detail_angle", "spot_angle", "spot_share", "color_by", "coverage",
                "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "two_sided", "translate", "rotate", "scale", "matrix", "variant",
                "instances", "sh_field", "surfels", "mesh", "lod", "skinned", "animation", "time"}
@@ -189,12 +189,13 @@ def load_scene(path, size=None) -> SceneFile:
     settings.tess = _tess_settings(r, ck)
     settings.mesh.threshold_px = ck.num(r, "mesh_threshold", "render", "render", default=settings.mesh.threshold_px,
                                         lo=0, hi=1e6)
-    if "color_by" in r:   # the point variant's debug colouring ("tier": the hybrid tiers)
-        settings.points.color_by = r["color_by"]
-        try:
-            settings.points.validate()
-        except ParamlodError as exc:
-            ck.fail("render.color_by", str(exc), "render", None, "color_by")
+    for key in ("color_by", "coverage"):   # the point variant's debug colouring, its pixel coverage
+        if key in r:
+            setattr(settings.points, key, r[key])
+            try:
+                settings.points.validate()
+            except ParamlodError as exc:
+                ck.fail(f"render.{key}", str(exc), "render", None, key)
     if "mesh_color_by" in r:
         settings.mesh.color_by = r["mesh_color_by"]
         try:

@@ -122,7 +122,8 @@ class DirectPointRenderer:
         sampling = (settings.factor(scale), settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, self._order,
                 *inst, materials_buf, cam_buf, np.uint32(n_views), view_masks, light_buf, *sampling, np.float32(settings.widen),
-                np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)), keys.color, keys.aux,
+                np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)),
+                np.uint32(settings.coverage == "centre"), keys.color, keys.aux,
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time

@@ -25,6 +25,7 @@ SAMPLING = ("segment", "extent")
 # the direct variant's colouring (kernels/points/points.cl debug_material): the material, a colour
 # per render patch, a colour per LOD step, a colour per hybrid tier
 COLOR_BY = ("material", "patch", "level", "tier")
+COVERAGE = ("centre", "pixel")   # PointSettings.coverage
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
@@ -52,6 +53,11 @@ class PointSettings:
     # same keys with fewer samples; single-view frames only): True always, False never, "auto"
     # while it saves enough samples to pay (paramlod/renderers/points.py AutoOcclusion)
     occlusion: bool | str = "auto"
+    # the direct variant's coverage: "pixel", a sample covers the pixel it lands in (the thesis's
+    # rule: silhouettes grown by up to a pixel), or "centre", the pixels whose centres its grid
+    # cell holds (silhouettes as a triangle's, but rare 1-pixel holes where the surface curves
+    # sharply; docs/points.md, "Pixel-centre coverage")
+    coverage: str = "pixel"
 
     def validate(self):
         if not 0.1 <= self.density <= 16:
@@ -73,6 +79,8 @@ class PointSettings:
             raise SceneError(f"points hybrid must be true or false, got {self.hybrid!r}")
         if not (isinstance(self.occlusion, bool) or self.occlusion == "auto"):
             raise SceneError(f"points occlusion must be true, false or \"auto\", got {self.occlusion!r}")
+        if self.coverage not in COVERAGE:
+            raise SceneError(f"points coverage must be one of {', '.join(COVERAGE)}, got {self.coverage!r}")
         if self.color_by not in COLOR_BY:
             raise SceneError(f"points color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
 
@@ -162,3 +170,60 @@ def patch_debug_materials(render_list: np.ndarray, materials: np.ndarray, color_
     elif color_by == "tier":
         m[:, :3] = tier_color(render_tiers(render_list))
     return m
+
+
+# --- pixel-centre coverage (PointSettings.coverage "centre") ------------------------------------
+COVER_REACH = 2         # pixels from the sample's own that a cell may reach
+COVER_OWN = 0x80000000  # the cell is degenerate or too large: the sample covers its own pixel
+
+
+def _ceil_small(t):
+    i = t.astype(np.int32)   # towards zero, as (int) in C
+    return np.where(i.astype(np.float32) < t, i + 1, i)
+
+
+def _floor_small(t):
+    i = t.astype(np.int32)
+    return np.where(i.astype(np.float32) > t, i - 1, i)
+
+
+def cover_cells(x, y, ju, jv, lo, hi, size) -> np.ndarray:
+    """numpy twin of cover_cells() in kernels/points/points.cl, float32 in the kernel's order: for
+    samples placed at screen (x, y) with screen Jacobian columns ``ju``, ``jv`` ((n, 2) pixels per
+    unit u, v) and cells [-lo, hi] ((n, 2) parameter offsets along u, v), the uint32 mask of the
+    pixel centres each cell holds, bit (dy + 2) * 5 + (dx + 2) for the pixel (dx, dy) from the
+    sample's own, inside the image ``size`` (W, H); COVER_OWN for a degenerate cell or one that
+    reaches past COVER_REACH pixels."""
+    f = np.float32
+    x, y = np.asarray(x, f), np.asarray(y, f)
+    ju, jv, lo, hi = (np.asarray(a, f) for a in (ju, jv, lo, hi))
+    with np.errstate(all="ignore"):
+        det = ju[:, 0] * jv[:, 1] - ju[:, 1] * jv[:, 0]
+        ok = det * det > f(1e-12) * (ju[:, 0] * ju[:, 0] + ju[:, 1] * ju[:, 1]) * (jv[:, 0] * jv[:, 0] + jv[:, 1] * jv[:, 1])
+        box = []
+        for k in (0, 1):   # x, then y: the cell's screen extent from the sample
+            a0, a1 = ju[:, k] * -lo[:, 0], ju[:, k] * hi[:, 0]
+            b0, b1 = jv[:, k] * -lo[:, 1], jv[:, k] * hi[:, 1]
+            box.append((np.where(a0 < a1, a0, a1) + np.where(b0 < b1, b0, b1),
+                        np.where(a0 < a1, a1, a0) + np.where(b0 < b1, b1, b0)))
+        px, py = x.astype(np.int32), y.astype(np.int32)
+        fx, fy = x - px.astype(f) - f(0.5), y - py.astype(f) - f(0.5)
+        bx0, bx1, by0, by1 = fx + box[0][0], fx + box[0][1], fy + box[1][0], fy + box[1][1]
+        reach = f(COVER_REACH + 1)
+        ok &= (bx0 > -reach) & (bx1 < reach) & (by0 > -reach) & (by1 < reach)
+        bx0, bx1, by0, by1 = (np.where(ok, b, f(0)) for b in (bx0, bx1, by0, by1))
+        x0, x1, y0, y1 = _ceil_small(bx0), _floor_small(bx1), _ceil_small(by0), _floor_small(by1)
+        idet = f(1) / det
+        bits = np.zeros(len(x), np.uint32)
+        w, h = size
+        for dy in range(-COVER_REACH, COVER_REACH + 1):
+            for dx in range(-COVER_REACH, COVER_REACH + 1):
+                qx, qy = f(dx) - fx, f(dy) - fy
+                a = (qx * jv[:, 1] - qy * jv[:, 0]) * idet
+                b = (ju[:, 0] * qy - ju[:, 1] * qx) * idet
+                inside = ((a >= -lo[:, 0]) & (a <= hi[:, 0]) & (b >= -lo[:, 1]) & (b <= hi[:, 1])
+                          & (px + dx >= 0) & (px + dx < w) & (py + dy >= 0) & (py + dy < h)
+                          & (dx >= x0) & (dx <= x1) & (dy >= y0) & (dy <= y1))
+                bits |= np.where(inside, np.uint32(1 << ((dy + COVER_REACH) * (2 * COVER_REACH + 1) + dx + COVER_REACH)),
+                                 np.uint32(0))
+    return np.where(ok, bits, np.uint32(COVER_OWN)).astype(np.uint32)

@@ -102,9 +102,9 @@ def test_factor_and_side_counts_twin():
 
 
 @pytest.mark.parametrize("settings", [
-    PointSettings(sampling="extent"),
-    PointSettings(sampling="extent", oversample=2.0, epsilon=0.25),
-    PointSettings(oversample=1.5, density=1.0),
+    PointSettings(sampling="extent", coverage="pixel"),
+    PointSettings(sampling="extent", oversample=2.0, epsilon=0.25, coverage="pixel"),
+    PointSettings(oversample=1.5, density=1.0, coverage="pixel"),
 ], ids=["extent", "extent-os2-eps", "segment-os1.5"])
 def test_key_buffer_equals_minimum_at_with_adaptive_options(settings):
     stats, color, pix, key, total = record_direct_points(settings, (80, 64))

@@ -1,0 +1,100 @@
+"""Pixel-centre coverage of the direct points (PointSettings.coverage "centre";
+kernels/points/points.cl cover_cells): a sample covers the pixels whose centres its grid cell
+holds, so silhouettes are the surface's instead of the surface grown by up to a pixel. The cell
+test against its numpy twin (paramlod.renderers.sampling.cover_cells), bit for bit, and what it
+does to silhouettes and holes."""
+import numpy as np
+import pyopencl as cl
+import pytest
+
+import paramlod as pl
+from helpers.holes import count_holes, dense_silhouette
+from paramlod import kernels
+from paramlod.core.layouts import cl_prelude
+from paramlod.device.context import cl_device
+from paramlod.function.codegen_cl import cl_dispatch_source
+from paramlod.function.registry import get_function
+from paramlod.renderers.sampling import COVER_OWN, COVER_REACH, cover_cells
+from renderers.test_silhouettes import _glyphs, _iou, _settings
+
+PROBE = """
+__kernel void probe(__global const float* in, uint n, uint W, uint H, __global uint* out) {
+    uint i = get_global_id(0);
+    if (i >= n) return;
+    __global const float* r = in + 10 * i;
+    Placed p;
+    p.x = r[0]; p.y = r[1];
+    out[i] = cover_cells(p, (float2)(r[2], r[3]), (float2)(r[4], r[5]), (float2)(r[6], r[7]),
+                         (float2)(r[8], r[9]), W, H);
+}
+"""
+
+
+def _device_cover(rows, size):
+    dev = cl_device()
+    src = "\n".join([cl_prelude(), kernels.source("common/common.cl"), cl_dispatch_source([get_function("sphere")]),
+                     kernels.source("common/keys.cl"), kernels.source("points/points.cl"), PROBE])
+    prog = cl.Program(dev.context, src).build()
+    mf = cl.mem_flags
+    inp = cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(rows, np.float32))
+    out = np.zeros(len(rows), np.uint32)
+    ob = cl.Buffer(dev.context, mf.WRITE_ONLY, out.nbytes)
+    prog.probe(dev.queue, (len(rows),), None, inp, np.uint32(len(rows)), np.uint32(size[0]), np.uint32(size[1]), ob)
+    cl.enqueue_copy(dev.queue, out, ob)
+    return out
+
+
+def test_cell_cover_equals_its_twin():
+    rng = np.random.default_rng(3)
+    n, size = 200_000, (40, 30)
+    xy = rng.uniform(0, 1, (n, 2)) * size
+    # Jacobian columns from sub-pixel to several pixels a step, some nearly parallel (silhouettes)
+    step = rng.uniform(0.05, 1.2, (n, 2)) * 10.0 ** rng.uniform(-1, 3, (n, 1))
+    ang = rng.uniform(0, 2 * np.pi, (n, 2))
+    ang[: n // 10, 1] = ang[: n // 10, 0] + rng.normal(0, 1e-3, n // 10)
+    ju = np.stack([np.cos(ang[:, 0]), np.sin(ang[:, 0])], 1) * (rng.uniform(0.3, 1.0, (n, 1)) / step[:, :1])
+    jv = np.stack([np.cos(ang[:, 1]), np.sin(ang[:, 1])], 1) * (rng.uniform(0.3, 1.0, (n, 1)) / step[:, 1:])
+    lo = step * rng.uniform(0.3, 0.7, (n, 2))
+    hi = step * rng.uniform(0.3, 0.7, (n, 2))
+    rows = np.concatenate([xy, ju, jv, lo, hi], 1).astype(np.float32)
+    rows[:50, 2:4] = [np.inf, 0.0]   # not finite: the own pixel
+    rows[50:100, 4:6] = np.nan
+    rows[100:5000, 4:6] = rows[100:5000, 2:4]   # parallel columns: degenerate, the own pixel
+    rows[5000:15000, 2:6] *= 8.0                 # cells of several pixels: past the reach, the own pixel
+    got = _device_cover(rows, size)
+    want = cover_cells(rows[:, 0], rows[:, 1], rows[:, 2:4], rows[:, 4:6], rows[:, 6:8], rows[:, 8:10], size)
+    np.testing.assert_array_equal(got, want)
+    # every kind of answer occurs: none, one or several centres, and the own-pixel fallback
+    counts = np.array([bin(b).count("1") for b in want[want != COVER_OWN]])
+    assert (counts == 0).any() and (counts == 1).any() and (counts >= 2).any()
+    assert (want[:5000] == COVER_OWN).all() and 0.03 < (want == COVER_OWN).mean() < 0.5
+    # a centre only within COVER_REACH pixels of the sample's own, never outside the image
+    assert not (want[want != COVER_OWN] >> np.uint32((2 * COVER_REACH + 1) ** 2)).any()
+
+
+@pytest.mark.parametrize("order", [4, 8, 12])
+def test_small_glyph_silhouettes_are_the_surfaces(order):
+    """Glyphs of 20 pixels: with pixel coverage a point covers the whole pixel it lands in and the
+    silhouette is the true one grown by up to a pixel (IoU 0.69-0.75); with centre coverage it
+    is the surface's (0.87-0.99 measured)."""
+    scene, cam, ref = _glyphs(order, 20)
+    iou = {}
+    for coverage in ("pixel", "centre"):
+        rs = _settings("points", "noAA")
+        rs.points.coverage = coverage
+        iou[coverage] = _iou(pl.render(scene, cam, "points", rs), ref)
+    assert iou["centre"] >= 0.85 and iou["centre"] >= iou["pixel"] + 0.1, iou
+
+
+@pytest.mark.parametrize("name,eye", [("torus", (0.3, 1.9, 1.4)), ("sphere", (0.0, 0.4, 2.4)),
+                                      ("torus", (1.2, 0.6, 0.9))])
+def test_centre_coverage_leaves_no_holes(name, eye):
+    scene = pl.Scene()
+    scene.add(name)
+    cam = pl.Camera.look_at(eye, (0, 0, 0), size=(128, 112))
+    rs = pl.RenderSettings()
+    rs.points.coverage = "centre"
+    frame = pl.render(scene, cam, "points", rs)
+    mask, dmax, _, _ = dense_silhouette(get_function(name), cam)
+    assert mask.sum() > 2000
+    assert count_holes(frame, mask, dmax, tol=0.02 * float(np.linalg.norm(eye))) == 0
