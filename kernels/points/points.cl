@@ -215,7 +215,7 @@ inline int point_eval_partials(uint func, __global const float* P, __global cons
 // to a pixel as when a sample covers the pixel it lands in.
 #define COVER_MARGIN 1.2f    // cells overlap by a tenth of a step on each side
 #define COVER_REACH 2        // pixels from the sample's own that a cell may reach
-#define COVER_OWN 0x80000000u   // cover_cells: the cell is degenerate or too large; the own pixel
+#define COVER_OWN 0x80000000u   // cover_cells: the cell is degenerate; the own pixel
 
 // the screen-space image (pixels) of the world-space direction d at the placed sample p
 inline float2 screen_dir(__global const float* cam, Placed p, float3 d) {
@@ -234,10 +234,9 @@ inline int floor_small(float t) { int i = (int)t; return (float)i > t ? i - 1 : 
 
 // The pixel centres the cell [-lo.x, hi.x] x [-lo.y, hi.y] (parameter offsets along u, v) of the
 // sample placed at p holds, for screen Jacobian columns ju, jv: bit (dy + 2) * 5 + (dx + 2) for the
-// pixel (dx, dy) from the sample's own; COVER_OWN when the cell is degenerate (its Jacobian
-// singular: a silhouette seen edge-on, a pole) or reaches beyond COVER_REACH pixels (an
-// undersampled patch), where the sample covers its own pixel as before. Pixels outside the image
-// (W x H) are never set.
+// pixel (dx, dy) from the sample's own, up to COVER_REACH pixels away; COVER_OWN when the cell is
+// degenerate (its Jacobian singular: a silhouette seen edge-on, a pole; or not finite), where the
+// sample covers its own pixel as before. Pixels outside the image (W x H) are never set.
 inline uint cover_cells(Placed p, float2 ju, float2 jv, float2 lo, float2 hi, uint W, uint H) {
 #pragma OPENCL FP_CONTRACT OFF   // as its twin evaluates it
     float det = ju.x * jv.y - ju.y * jv.x;
@@ -250,9 +249,14 @@ inline uint cover_cells(Placed p, float2 ju, float2 jv, float2 lo, float2 hi, ui
     int px = (int)p.x, py = (int)p.y;
     float fx = p.x - (float)px - 0.5f, fy = p.y - (float)py - 0.5f;   // the sample from its pixel's centre
     float ex0 = fx + xmin, ex1 = fx + xmax, ey0 = fy + ymin, ey1 = fy + ymax;   // the box from that centre
-    const float reach = (float)(COVER_REACH + 1);   // no centre farther than COVER_REACH inside (NaN: out)
-    if (!(ex0 > -reach && ex1 < reach && ey0 > -reach && ey1 < reach)) return COVER_OWN;
-    int x0 = ceil_small(ex0), x1 = floor_small(ex1), y0 = ceil_small(ey0), y1 = floor_small(ey1);
+    const float reach = (float)(COVER_REACH + 1);
+    if (!(ex0 <= ex1 && ey0 <= ey1)) return COVER_OWN;   // NaN
+    // a larger cell (an undersampled patch) covers the centres inside it up to COVER_REACH pixels
+    // away: taking only its own pixel left holes beside it (Johi's heart)
+    int x0 = ceil_small(ex0 > -reach ? ex0 : -reach), x1 = floor_small(ex1 < reach ? ex1 : reach);
+    int y0 = ceil_small(ey0 > -reach ? ey0 : -reach), y1 = floor_small(ey1 < reach ? ey1 : reach);
+    x0 = x0 > -COVER_REACH ? x0 : -COVER_REACH; x1 = x1 < COVER_REACH ? x1 : COVER_REACH;
+    y0 = y0 > -COVER_REACH ? y0 : -COVER_REACH; y1 = y1 < COVER_REACH ? y1 : COVER_REACH;
     float idet = 1.0f / det;
     uint bits = 0u;
     for (int dy = y0; dy <= y1; ++dy) {

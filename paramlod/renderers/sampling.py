@@ -174,7 +174,7 @@ def patch_debug_materials(render_list: np.ndarray, materials: np.ndarray, color_
 
 # --- pixel-centre coverage (PointSettings.coverage "centre") ------------------------------------
 COVER_REACH = 2         # pixels from the sample's own that a cell may reach
-COVER_OWN = 0x80000000  # the cell is degenerate or too large: the sample covers its own pixel
+COVER_OWN = 0x80000000  # the cell is degenerate: the sample covers its own pixel
 
 
 def _ceil_small(t):
@@ -192,8 +192,8 @@ def cover_cells(x, y, ju, jv, lo, hi, size) -> np.ndarray:
     samples placed at screen (x, y) with screen Jacobian columns ``ju``, ``jv`` ((n, 2) pixels per
     unit u, v) and cells [-lo, hi] ((n, 2) parameter offsets along u, v), the uint32 mask of the
     pixel centres each cell holds, bit (dy + 2) * 5 + (dx + 2) for the pixel (dx, dy) from the
-    sample's own, inside the image ``size`` (W, H); COVER_OWN for a degenerate cell or one that
-    reaches past COVER_REACH pixels."""
+    sample's own, up to COVER_REACH pixels away, inside the image ``size`` (W, H); COVER_OWN for a
+    degenerate or not finite cell."""
     f = np.float32
     x, y = np.asarray(x, f), np.asarray(y, f)
     ju, jv, lo, hi = (np.asarray(a, f) for a in (ju, jv, lo, hi))
@@ -210,9 +210,11 @@ def cover_cells(x, y, ju, jv, lo, hi, size) -> np.ndarray:
         fx, fy = x - px.astype(f) - f(0.5), y - py.astype(f) - f(0.5)
         bx0, bx1, by0, by1 = fx + box[0][0], fx + box[0][1], fy + box[1][0], fy + box[1][1]
         reach = f(COVER_REACH + 1)
-        ok &= (bx0 > -reach) & (bx1 < reach) & (by0 > -reach) & (by1 < reach)
-        bx0, bx1, by0, by1 = (np.where(ok, b, f(0)) for b in (bx0, bx1, by0, by1))
-        x0, x1, y0, y1 = _ceil_small(bx0), _floor_small(bx1), _ceil_small(by0), _floor_small(by1)
+        ok &= (bx0 <= bx1) & (by0 <= by1)
+        bx0, by0 = (np.where(ok, np.where(b > -reach, b, -reach), f(0)) for b in (bx0, by0))
+        bx1, by1 = (np.where(ok, np.where(b < reach, b, reach), f(0)) for b in (bx1, by1))
+        x0, y0 = (np.maximum(_ceil_small(b), -COVER_REACH) for b in (bx0, by0))
+        x1, y1 = (np.minimum(_floor_small(b), COVER_REACH) for b in (bx1, by1))
         idet = f(1) / det
         bits = np.zeros(len(x), np.uint32)
         w, h = size

@@ -1,7 +1,7 @@
 """``paramlod bench --peers``: paramlod against the tools its users would use instead, in one run.
 
-Rendering (paramlod points and tess against pyvista/VTK and FURY 2/pygfx, each peer drawing the same
-surface as a fixed triangle mesh at several resolutions): the 20x20 order-8 and order-12 SH glyph
+Rendering (paramlod points, points with pixel-centre coverage and tess against pyvista/VTK and FURY
+2/pygfx, each peer drawing the same surface as a fixed triangle mesh at several resolutions): the 20x20 order-8 and order-12 SH glyph
 fields and the torus, framed and close up. Every row has its warm median time per frame (render and
 read the image back to the host) and its silhouette error, 1 - IoU of its coverage mask against a
 reference silhouette computed once per scene: the analytic surface tessellated until its triangles
@@ -294,14 +294,20 @@ def reference_silhouette(spec: dict, field=None) -> tuple[np.ndarray, dict]:
 
 
 # --- paramlod ------------------------------------------------------------------------------------------
+# paramlod's rows: its variants, and the points with pixel-centre coverage (PointSettings.coverage)
+PARAMLOD_ROWS = {"points": ("points", "pixel"), "points-centre": ("points", "centre"), "tess": ("tess", "pixel")}
+
+
 def paramlod_render_row(spec: dict, variant: str, frames: int, warmup: int = 1, field=None,
                         threshold: float = THRESHOLD) -> dict:
-    """paramlod's row: warm median of render + image read-back, and the last frame's coverage."""
+    """paramlod's row (``variant``: a key of PARAMLOD_ROWS): warm median of render + image
+    read-back, and the last frame's coverage."""
     scene = paramlod_scene(spec, field)
     cam = camera_of(spec)
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
     rs.tess.l_max, rs.tess.l_min = 64.0, 8.0   # the thesis's, as in paramlod.app.bench.scenes
+    label, (variant, rs.points.coverage) = variant, PARAMLOD_ROWS[variant]
     times, frame = [], None
     for k in range(warmup + frames):
         t0 = time.perf_counter()
@@ -309,7 +315,7 @@ def paramlod_render_row(spec: dict, variant: str, frames: int, warmup: int = 1, 
         frame.rgb8()
         if k >= warmup:
             times.append((time.perf_counter() - t0) * 1e3)
-    label = variant if threshold == THRESHOLD else f"{variant} t={threshold:g}"
+    label = label if threshold == THRESHOLD else f"{label} t={threshold:g}"
     return {"tool": "paramlod", "version": _version("paramlod"), "variant": label, "threshold": threshold,
             "ms": statistics.median(times), "mask": frame.coverage}
 
@@ -566,7 +572,7 @@ def run_peers(args, out_dir, log=print) -> dict:
             log(f"reference {spec['name']}: {info['vertices']:,} vertices, edges <= {info['max_edge_px']:.2f} px, "
                 f"{refs[spec['name']].sum():,} pixels covered ({info['seconds']:.1f} s)")
             if "paramlod" in tools:
-                for variant, t in ((v, t) for t in args.peers_thresholds for v in ("points", "tess")):
+                for variant, t in ((v, t) for t in args.peers_thresholds for v in PARAMLOD_ROWS):
                     try:
                         r = paramlod_render_row(spec, variant, frames, warmup, field, t)
                     except ParamlodError as exc:
