@@ -205,8 +205,8 @@ inline int point_eval_partials(uint func, __global const float* P, __global cons
     return SAMPLE_DRAWN;
 }
 
-// Pixel-centre coverage (PointSettings.coverage "centre"; twin:
-// paramlod.renderers.sampling.cell_cover). A sample stands for its cell of the patch's grid: the
+// Pixel-centre coverage (PointSettings.coverage "centre"; cover_cells' twin:
+// paramlod.renderers.sampling.cover_cells). A sample stands for its cell of the patch's grid: the
 // parameters from half-way to the previous sample to half-way to the next along u and v,
 // widened by COVER_MARGIN for the surface's curvature, mapped to the screen by the linearised
 // projection at the sample (its screen Jacobian from the partials). It covers the pixels whose
@@ -244,8 +244,10 @@ inline uint cover_cells(Placed p, float2 ju, float2 jv, float2 lo, float2 hi, ui
     // the cell's screen bounding box, relative to the sample
     float ax0 = ju.x * -lo.x, ax1 = ju.x * hi.x, bx0 = jv.x * -lo.y, bx1 = jv.x * hi.y;
     float ay0 = ju.y * -lo.x, ay1 = ju.y * hi.x, by0 = jv.y * -lo.y, by1 = jv.y * hi.y;
-    float xmin = (ax0 < ax1 ? ax0 : ax1) + (bx0 < bx1 ? bx0 : bx1), xmax = (ax0 < ax1 ? ax1 : ax0) + (bx0 < bx1 ? bx1 : bx0);
-    float ymin = (ay0 < ay1 ? ay0 : ay1) + (by0 < by1 ? by0 : by1), ymax = (ay0 < ay1 ? ay1 : ay0) + (by0 < by1 ? by1 : by0);
+    float xmin = (ax0 < ax1 ? ax0 : ax1) + (bx0 < bx1 ? bx0 : bx1);
+    float xmax = (ax0 < ax1 ? ax1 : ax0) + (bx0 < bx1 ? bx1 : bx0);
+    float ymin = (ay0 < ay1 ? ay0 : ay1) + (by0 < by1 ? by0 : by1);
+    float ymax = (ay0 < ay1 ? ay1 : ay0) + (by0 < by1 ? by1 : by0);
     int px = (int)p.x, py = (int)p.y;
     float fx = p.x - (float)px - 0.5f, fy = p.y - (float)py - 0.5f;   // the sample from its pixel's centre
     float ex0 = fx + xmin, ex1 = fx + xmax, ey0 = fy + ymin, ey1 = fy + ymax;   // the box from that centre
@@ -271,8 +273,8 @@ inline uint cover_cells(Placed p, float2 ju, float2 jv, float2 lo, float2 hi, ui
     return bits;
 }
 
-// Half the parameter gaps to the previous and the next sample of a grid direction (the
-// cell_cover margin applied); a grid end takes the gap on its inner side for both.
+// Half the parameter gaps to the previous and the next sample of a grid direction, times
+// COVER_MARGIN; a grid end takes the gap on its inner side for both.
 inline float2 cell_half(float x0, float x1, uint n, uint na, float a, float m, uint i) {
     float x = grid_at(x0, x1, n, na, a, m, i);
     float prev = i > 0u ? x - grid_at(x0, x1, n, na, a, m, i - 1u) : grid_at(x0, x1, n, na, a, m, 1u) - x;
@@ -442,7 +444,8 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                         uint q = pix;
                         if (cover != COVER_OWN) {
                             int k = 31 - (int)clz(left & (~left + 1u));   // the lowest bit left
-                            int dx = k % (2 * COVER_REACH + 1) - COVER_REACH, dy = k / (2 * COVER_REACH + 1) - COVER_REACH;
+                            int side = 2 * COVER_REACH + 1;
+                            int dx = k % side - COVER_REACH, dy = k / side - COVER_REACH;
                             q = (uint)((int)pix + dy * (int)W + dx);
                         }
 #ifndef PL_RECORD

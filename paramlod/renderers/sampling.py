@@ -199,7 +199,8 @@ def cover_cells(x, y, ju, jv, lo, hi, size) -> np.ndarray:
     ju, jv, lo, hi = (np.asarray(a, f) for a in (ju, jv, lo, hi))
     with np.errstate(all="ignore"):
         det = ju[:, 0] * jv[:, 1] - ju[:, 1] * jv[:, 0]
-        ok = det * det > f(1e-12) * (ju[:, 0] * ju[:, 0] + ju[:, 1] * ju[:, 1]) * (jv[:, 0] * jv[:, 0] + jv[:, 1] * jv[:, 1])
+        ju2, jv2 = ju[:, 0] * ju[:, 0] + ju[:, 1] * ju[:, 1], jv[:, 0] * jv[:, 0] + jv[:, 1] * jv[:, 1]
+        ok = det * det > f(1e-12) * ju2 * jv2
         box = []
         for k in (0, 1):   # x, then y: the cell's screen extent from the sample
             a0, a1 = ju[:, k] * -lo[:, 0], ju[:, k] * hi[:, 0]
@@ -226,6 +227,6 @@ def cover_cells(x, y, ju, jv, lo, hi, size) -> np.ndarray:
                 inside = ((a >= -lo[:, 0]) & (a <= hi[:, 0]) & (b >= -lo[:, 1]) & (b <= hi[:, 1])
                           & (px + dx >= 0) & (px + dx < w) & (py + dy >= 0) & (py + dy < h)
                           & (dx >= x0) & (dx <= x1) & (dy >= y0) & (dy <= y1))
-                bits |= np.where(inside, np.uint32(1 << ((dy + COVER_REACH) * (2 * COVER_REACH + 1) + dx + COVER_REACH)),
-                                 np.uint32(0))
+                bit = np.uint32(1 << ((dy + COVER_REACH) * (2 * COVER_REACH + 1) + dx + COVER_REACH))
+                bits |= np.where(inside, bit, np.uint32(0))
     return np.where(ok, bits, np.uint32(COVER_OWN)).astype(np.uint32)
