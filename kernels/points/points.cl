@@ -213,7 +213,7 @@ inline int point_eval_partials(uint func, __global const float* P, __global cons
 // centres its cell holds, as a triangle covers the pixels whose centres it holds; neighbouring
 // cells tile the patch, so the points' silhouette is the surface's, not the surface grown by up
 // to a pixel as when a sample covers the pixel it lands in.
-#define COVER_MARGIN 1.2f    // cells overlap by a tenth of a step on each side
+#define COVER_MARGIN 1.3f    // cells overlap by 15 % of a step on each side
 #define COVER_REACH 2        // pixels from the sample's own that a cell may reach
 #define COVER_OWN 0x80000000u   // cover_cells: the cell is degenerate; the own pixel
 

@@ -29,6 +29,16 @@ def test_bench_measures_supersampled_points(tmp_path):
     assert ss["device_buffers_mib"] > plain["device_buffers_mib"]
 
 
+def test_bench_measures_points_with_centre_coverage(tmp_path):
+    assert main(["bench", "sphere", "--variants", "points", "points-centre", "--size", "64x48", "--distances",
+                 "1", "--frames", "2", "--warmup", "1", "--extras", "--out", str(tmp_path)]) == 0
+    v = json.loads((tmp_path / "results.json").read_text())["scenarios"]["sphere"]["variants"]
+    plain, centre = v["points"][0], v["points-centre"][0]
+    # the same samples; the silhouette no longer grown by up to a pixel: fewer pixels written
+    assert centre["samples"] == plain["samples"]
+    assert 0.8 * plain["pixels_written"] < centre["pixels_written"] < plain["pixels_written"]
+
+
 def test_bench_names_unknown_scenarios(tmp_path, capsys):
     assert main(["bench", "teapot", "--out", str(tmp_path)]) == 2
     assert "unknown scenario(s) teapot" in capsys.readouterr().err

@@ -62,7 +62,9 @@ from paramlod.surfels.render import FixedCount, default_camera, render_surfels
 # key buffers, points-ssaa the thesis's local-framebuffer 4xSS
 VARIANTS = {"points": ("points", None), "points-4xSS": ("points", "4xSS"), "points-ssaa": ("points-ssaa", None),
             "tess": ("tess", "noAA"), "tess-4xSS+8xMS": ("tess", "4xSS+8xMS"),
-            "points-hybrid": ("points", "hybrid"), "tess-hybrid": ("tess", "hybrid")}
+            "points-hybrid": ("points", "hybrid"), "tess-hybrid": ("tess", "hybrid"), "points-centre": ("points", None)}
+# bench variants drawn with pixel-centre coverage (PointSettings.coverage, docs/points.md)
+CENTRE_COVERAGE = ("points-centre",)
 DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8xMS"]
 NO_CULLING = "(no culling)"   # the label of rows measured with --culling off / both
 
@@ -190,8 +192,10 @@ def _device_buffers_mib(scene, size, ss=(1,)) -> float:
     return total / 2 ** 20
 
 
-def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling: bool = True):
+def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling: bool = True,
+            coverage: str = "pixel"):
     rs = RenderSettings()
+    rs.points.coverage = coverage
     rs.lod.threshold = (threshold, threshold)
     rs.lod.detail_angle = args.detail_angle
     if not culling:   # on: the defaults (occlusion "auto", back faces of one-sided materials)
@@ -342,7 +346,8 @@ def run_bench(args) -> int:
                 rows = per["variants"].setdefault(key, [])
                 for dist in args.distances:
                     try:
-                        r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling)
+                        r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling,
+                                    "centre" if vname in CENTRE_COVERAGE else "pixel")
                     except ParamlodError as exc:
                         r = {"distance": dist, "error": str(exc)}
                     rows.append(r)
