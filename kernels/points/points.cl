@@ -273,10 +273,9 @@ inline uint cover_cells(Placed p, float2 ju, float2 jv, float2 lo, float2 hi, ui
     return bits;
 }
 
-// Half the parameter gaps to the previous and the next sample of a grid direction, times
-// COVER_MARGIN; a grid end takes the gap on its inner side for both.
-inline float2 cell_half(float x0, float x1, uint n, uint na, float a, float m, uint i) {
-    float x = grid_at(x0, x1, n, na, a, m, i);
+// Half the parameter gaps from sample i (at x) of a grid direction to the previous and the next,
+// times COVER_MARGIN; a grid end takes the gap on its inner side for both.
+inline float2 cell_half(float x, float x0, float x1, uint n, uint na, float a, float m, uint i) {
     float prev = i > 0u ? x - grid_at(x0, x1, n, na, a, m, i - 1u) : grid_at(x0, x1, n, na, a, m, 1u) - x;
     float next = i + 1u < n ? grid_at(x0, x1, n, na, a, m, i + 1u) - x : prev;
     if (i == 0u) prev = next;
@@ -386,7 +385,7 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
             if ((uint)(order[mid] >> 32) <= c) lo = mid; else hi = mid;
         }
         uint place = lo;
-        uint W = (uint)cam[CAM_W], layer_pixels = W * (uint)cam[CAM_H];
+        uint W = (uint)cam[CAM_W], H = (uint)cam[CAM_H], layer_pixels = W * H;
         while (c < c_end) {   // one patch per pass: its chunks in [c, c_end)
             ulong entry = order[place];
             uint first = (uint)(entry >> 32), pid = (uint)entry;
@@ -428,10 +427,10 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     // the pixels it covers: its own, or (centre) those whose centres its cell holds
                     uint cover = COVER_OWN;
                     if (centre) {
-                        float2 hu = cell_half(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
-                        float2 hv = cell_half(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
+                        float2 hu = cell_half(us, g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
+                        float2 hv = cell_half(vs, g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
                         cover = cover_cells(p, screen_dir(cv, p, tu), screen_dir(cv, p, tv), (float2)(hu.x, hv.x),
-                                            (float2)(hu.y, hv.y), W, layer_pixels / W);
+                                            (float2)(hu.y, hv.y), W, H);
                     }
                     bool shaded = false;
                     ulong key, aux;

@@ -36,8 +36,9 @@ void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uin
             image[3 * i + 2] = (background >> 8) & 255u;
         } else {
             uint rgba = (uint)k;
+            float alpha = (float)(rgba & 255u) / 255.0f;
             color[i] = (float4)(SRGB8_DECODED[rgba >> 24], SRGB8_DECODED[(rgba >> 16) & 255u],
-                                SRGB8_DECODED[(rgba >> 8) & 255u], (float)(rgba & 255u) / 255.0f);
+                                SRGB8_DECODED[(rgba >> 8) & 255u], alpha);
             depth[i] = as_float((uint)(k >> 32));
             ulong a = aux_buf[i];
             uint oct = (uint)(a >> 12) & 0xFFFFFu;
@@ -61,7 +62,7 @@ void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uin
             }
             image[3 * i] = out[0]; image[3 * i + 1] = out[1]; image[3 * i + 2] = out[2];
             atomic_inc(&written);
-            atomic_add(&covered, convert_uint(rint((float)(rgba & 255u) / 255.0f * (float)PL_SS_COUNT)));
+            atomic_add(&covered, convert_uint(rint(alpha * (float)PL_SS_COUNT)));
         }
     }
     barrier(CLK_LOCAL_MEM_FENCE);

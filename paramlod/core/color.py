@@ -1,12 +1,12 @@
 """sRGB, the one copy: the transfer curve on the host (numpy only) and what the device gets of it.
 
 The device reads everything of sRGB from here: ``cl_tables()`` (part of the OpenCL prelude,
-``paramlod.core.layouts.cl_prelude``) emits ``srgb8_decoded()`` as the ``SRGB8_DECODED`` table
-that the resolve in kernels/points/resolve.cl looks codes up in, and ``srgb8_thresholds()`` as the
-``SRGB8_THRESHOLDS`` table that ``srgb8()`` in kernels/common/keys.cl searches; ``srgb_tables()`` are uploaded for the integer
-encoder ``encode_srgb8`` in kernels/points/subsamples.cl (paramlod.renderers.targets). The
-tessellation shaders write linear colour; the host encodes it (``linear_to_srgb8``). The numpy
-twins of the kernels call the functions here.
+``paramlod.core.layouts.cl_prelude``) emits ``srgb8_decoded()`` as the ``SRGB8_DECODED`` table that
+the resolve in kernels/points/resolve.cl looks codes up in, and ``srgb8_thresholds()`` as the
+``SRGB8_THRESHOLDS`` table that ``srgb8()`` in kernels/common/keys.cl searches; ``srgb_tables()``
+are uploaded for the integer encoder ``encode_srgb8`` in kernels/points/subsamples.cl
+(paramlod.renderers.targets). The tessellation shaders write linear colour; the host encodes it
+(``linear_to_srgb8``). The numpy twins of the kernels call the functions here.
 
 Two encoders share the curve and differ only in the precision of the arithmetic, which matters:
 on float32 input the two disagree by one code on 203 of the 1,065,353,217 float32 values in

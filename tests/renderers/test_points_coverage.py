@@ -10,13 +10,13 @@ import pytest
 import paramlod as pl
 from conftest import sphere_disc
 from helpers.holes import count_holes, dense_silhouette
+from helpers.silhouettes import glyph_case, iou_of, settings_for
 from paramlod import kernels
 from paramlod.core.layouts import cl_prelude
 from paramlod.device.context import cl_device
 from paramlod.function.codegen_cl import cl_dispatch_source
 from paramlod.function.registry import get_function
 from paramlod.renderers.sampling import COVER_OWN, COVER_REACH, cover_cells
-from renderers.test_silhouettes import _glyphs, _iou, _settings
 
 PROBE = """
 __kernel void probe(__global const float* in, uint n, uint W, uint H, __global uint* out) {
@@ -80,12 +80,12 @@ def test_small_glyph_silhouettes_are_the_surfaces(order):
     """Glyphs of 20 pixels: with pixel coverage a point covers the whole pixel it lands in and the
     silhouette is the true one grown by up to a pixel (IoU 0.69-0.75); with centre coverage it
     is the surface's (0.86-0.99 measured)."""
-    scene, cam, ref = _glyphs(order, 20)
+    scene, cam, ref = glyph_case(order, 20)
     iou = {}
     for coverage in ("pixel", "centre"):
-        rs = _settings("points", "noAA")
+        rs = settings_for("points", "noAA")
         rs.points.coverage = coverage
-        iou[coverage] = _iou(pl.render(scene, cam, "points", rs), ref)
+        iou[coverage] = iou_of(pl.render(scene, cam, "points", rs), ref)
     assert iou["centre"] >= 0.85 and iou["centre"] >= iou["pixel"] + 0.1, iou
 
 

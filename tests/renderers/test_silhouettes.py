@@ -7,30 +7,11 @@ import numpy as np
 import pytest
 
 import paramlod as pl
+from helpers.silhouettes import glyph_case, iou_of, settings_for
 from paramlod.app.bench import peers
 from paramlod.scene.framing import framing_camera
 
 VARIANTS = (("tess", "noAA"), ("tess", "hybrid"), ("points", "noAA"), ("points", "hybrid"))
-
-
-def _settings(variant, aa, threshold=84.0, detail_levels=False):
-    rs = pl.RenderSettings()
-    rs.lod.threshold = (threshold, threshold)
-    rs.tess.l_max, rs.tess.l_min = 64.0, 8.0
-    rs.tess.detail_levels = detail_levels
-    rs.apply_aa(aa, variant=variant)
-    return rs
-
-
-def _iou(frame, reference) -> float:
-    mask = frame.color[..., 3] >= 0.5
-    return 1.0 - peers.silhouette_error(mask, reference)
-
-
-def _glyphs(order, px):
-    spec = peers.scene_spec(f"glyphs{order}", (2 * px, 2 * px), grid=2)
-    field = peers.glyph_field(order, 2)
-    return peers.paramlod_scene(spec, field), peers.camera_of(spec), peers.reference_silhouette(spec, field)[0]
 
 
 def _analytic(scene, cam, n=900):
@@ -54,8 +35,8 @@ def _analytic(scene, cam, n=900):
 @pytest.mark.parametrize("order", [4, 8, 12])
 @pytest.mark.parametrize("px", [60, 200])
 def test_glyph_fields(order, px):
-    scene, cam, ref = _glyphs(order, px)
-    iou = {f"{v}-{aa}": _iou(pl.render(scene, cam, v, _settings(v, aa)), ref) for v, aa in VARIANTS}
+    scene, cam, ref = glyph_case(order, px)
+    iou = {f"{v}-{aa}": iou_of(pl.render(scene, cam, v, settings_for(v, aa)), ref) for v, aa in VARIANTS}
     assert min(iou.values()) >= 0.8, iou
     # a point covers the (sub)pixel it lands in: the points' silhouette is the true one grown by up
     # to a (sub)pixel, so they trail tess (by up to 0.07 here; the issue's aim of 0.03 is not met)
@@ -70,20 +51,20 @@ def test_seashell_and_yarn(name, direction, up, px):
     scene.add(name)
     cam = framing_camera(scene, direction, up, 40.0, (px, px), margin=1.0)
     ref = _analytic(scene, cam)
-    iou = {f"{v}-{aa}": _iou(pl.render(scene, cam, v, _settings(v, aa, 62.0)), ref) for v, aa in VARIANTS}
+    iou = {f"{v}-{aa}": iou_of(pl.render(scene, cam, v, settings_for(v, aa, 62.0)), ref) for v, aa in VARIANTS}
     assert min(iou.values()) >= 0.8, iou
 
 
 @pytest.mark.parametrize("order,before,after", [(4, 0.9, 0.93), (8, 0.55, 0.8), (12, 0.5, 0.72)])
-def test_detail_levels_draw_the_lobes_of_small_glyphs(order, before, after):
+def test_detail_levels_draw_the_lobes_of_smallglyph_case(order, before, after):
     """Glyphs of 20 pixels: a patch's 8-sample lines cut across thin lobes, so the tessellation
     level taken from them draws the lobes short. With TessSettings.detail_levels the spot check
     finds the sub-pixel detail and the patch is tessellated for a finer threshold. (Measured
     here: 0.86 -> 0.95, 0.50 -> 0.83, 0.46 -> 0.76 for orders 4, 8, 12; order 12 stays below 0.8.)"""
-    scene, cam, ref = _glyphs(order, 20)
-    plain = pl.render(scene, cam, "tess", _settings("tess", "noAA"))
-    detailed = pl.render(scene, cam, "tess", _settings("tess", "noAA", detail_levels=True))
-    iou = _iou(plain, ref), _iou(detailed, ref)
+    scene, cam, ref = glyph_case(order, 20)
+    plain = pl.render(scene, cam, "tess", settings_for("tess", "noAA"))
+    detailed = pl.render(scene, cam, "tess", settings_for("tess", "noAA", detail_levels=True))
+    iou = iou_of(plain, ref), iou_of(detailed, ref)
     assert iou[0] < before and iou[1] > after, iou
     assert sum(detailed.stats["detail_patches"][1:]) > 0 and plain.stats["detail_patches"][1:] == [0, 0]
 
@@ -92,8 +73,8 @@ def test_detail_levels_leave_smooth_shapes_alone():
     scene = pl.Scene()
     scene.add("torus", transform=pl.rotate(50, (1, 0, 0)))
     cam = pl.Camera.look_at((0, 1, 3), (0, 0, 0), size=(64, 48))
-    plain = pl.render(scene, cam, "tess", _settings("tess", "noAA"))
-    detailed = pl.render(scene, cam, "tess", _settings("tess", "noAA", detail_levels=True))
+    plain = pl.render(scene, cam, "tess", settings_for("tess", "noAA"))
+    detailed = pl.render(scene, cam, "tess", settings_for("tess", "noAA", detail_levels=True))
     assert detailed.stats["detail_patches"] == [plain.stats["render_patches"], 0, 0]
     np.testing.assert_array_equal(detailed.color, plain.color)
     with pytest.raises(pl.SceneError, match="detail_levels must be true or false"):
