@@ -9,6 +9,12 @@
 //             Multi-view geometry-stage passes (PL_VIEWS): each outer level is the largest any
 //             view that sees the edge needs (the inner levels come from the LOD stage's
 //             extents, already the largest over the views).
+//   chord:    (single view) each outer level from how far that edge's 8 samples bend on the
+//             screen (the largest second difference |s[i-1] - 2 s[i] + s[i+1]|): enough equal
+//             segments that their chords stray at most u_chord pixels from the edge (a chord of
+//             step h strays about h^2 |c''| / 8); each inner level from the same measure over
+//             the 6 parameter lines between the two edges across it, and at least their levels.
+//             kernels/tess/grid.cl computes the same levels for the grid tessellator.
 // The parameter range handed to the evaluation stage is widened by u_overlap of its size per
 // side (clamped to the function's domain) so that T-junctions between patches of different size
 // are covered.
@@ -25,12 +31,18 @@ patch out uint tc_inst;
 uniform vec2 u_threshold;    // effective LOD thresholds t_u, t_v in output pixels
 uniform vec2 u_level;        // fixed: (inner, outer); adaptive: base level L for (inner, outer)
 uniform vec2 u_clamp;        // l_min, l_max
-uniform int u_adaptive;
+uniform int u_adaptive;     // 0 fixed, 1 adaptive, 2 chord
+uniform float u_chord;       // chord: the most a chord may stray from the surface, pixels
 uniform float u_near;
 uniform float u_overlap;
 
 float pl_adaptive(float e, float L, float t) {
     float l = e * L / min(t, L);
+    return clamp(isnan(l) ? u_clamp.x : l, u_clamp.x, u_clamp.y);
+}
+
+float pl_chord(float bend) {
+    float l = 7.0 * sqrt(bend / (8.0 * u_chord));
     return clamp(isnan(l) ? u_clamp.x : l, u_clamp.x, u_clamp.y);
 }
 
@@ -94,12 +106,26 @@ void main() {
                 }
             }
 #else
-            for (int e = 0; e < 4; ++e) {
-                vec2 prev = vec2(0.0);
-                int prev_state = 2;
+            // lines 0-3: the edges; chord adds 4-9, the lines of constant v between edges 1 and 3
+            // (along u), and 10-15, those of constant u between edges 0 and 2 (along v)
+            float bend[16];
+            int lines = u_adaptive == 2 ? 16 : 4;
+            for (int e = 0; e < lines; ++e) {
+                float la = a[e & 3], lb = b[e & 3], lc = c[e & 3], ld = d[e & 3];
+                if (e >= 4) {
+                    float g = float(e < 10 ? e - 3 : e - 9) / 7.0;
+                    la = e < 10 ? r.x : pl_lerp(r.x, r.y, g);
+                    lb = e < 10 ? r.y : la;
+                    lc = e < 10 ? pl_lerp(r.z, r.w, g) : r.z;
+                    ld = e < 10 ? lc : r.w;
+                }
+                float l = 0.0;
+                bend[e] = 0.0;
+                vec2 prev = vec2(0.0), prev2 = vec2(0.0);
+                int prev_state = 2, prev2_state = 2;
                 for (int i = 0; i < 8; ++i) {
                     float f = float(i) / 7.0;
-                    vec3 p = pl_position(func, pl_lerp(a[e], b[e], f), pl_lerp(c[e], d[e], f), P);
+                    vec3 p = pl_position(func, pl_lerp(la, lb, f), pl_lerp(lc, ld, f), P);
                     int state = 2;                       // 0 ok, 1 behind the near plane, 2 NaN/inf
                     vec2 s = vec2(0.0);
                     if (!pl_bad3(p)) {
@@ -108,21 +134,39 @@ void main() {
                         s = vec2((q.x / q.w * 0.5 + 0.5) * u_screen.x, (0.5 - q.y / q.w * 0.5) * u_screen.y);
                     }
                     if (i > 0) {
-                        if (state == 1 || prev_state == 1) len[e] = PL_INF;   // unmeasurable: finest
-                        else if (state == 0 && prev_state == 0) len[e] += length(s - prev);
+                        if (state == 1 || prev_state == 1) l = bend[e] = PL_INF;   // unmeasurable: finest
+                        else if (state == 0 && prev_state == 0) l += length(s - prev);
                     }
+                    if (i > 1 && state == 0 && prev_state == 0 && prev2_state == 0)
+                        bend[e] = max(bend[e], length(prev2 - 2.0 * prev + s));
+                    prev2 = prev;
+                    prev2_state = prev_state;
                     prev = s;
                     prev_state = state;
                 }
+                if (e < 4) len[e] = l;
+            }
+            if (u_adaptive == 2) {
+                float bu = 0.0, bv = 0.0;
+                for (int e = 4; e < 10; ++e) bu = max(bu, bend[e]);
+                for (int e = 10; e < 16; ++e) bv = max(bv, bend[e]);
+                float o[4];
+                for (int e = 0; e < 4; ++e) o[e] = ceil(pl_chord(bend[e]));
+                gl_TessLevelOuter[0] = o[0]; gl_TessLevelOuter[1] = o[1];
+                gl_TessLevelOuter[2] = o[2]; gl_TessLevelOuter[3] = o[3];
+                gl_TessLevelInner[0] = max(max(o[1], o[3]), ceil(pl_chord(bu)));
+                gl_TessLevelInner[1] = max(max(o[0], o[2]), ceil(pl_chord(bv)));
             }
 #endif
             float L = u_level.y;
-            gl_TessLevelOuter[0] = pl_adaptive(len[0], L, u_threshold.y);
-            gl_TessLevelOuter[1] = pl_adaptive(len[1], L, u_threshold.x);
-            gl_TessLevelOuter[2] = pl_adaptive(len[2], L, u_threshold.y);
-            gl_TessLevelOuter[3] = pl_adaptive(len[3], L, u_threshold.x);
-            gl_TessLevelInner[0] = pl_adaptive(vs_ext[0].x, u_level.x, u_threshold.x);
-            gl_TessLevelInner[1] = pl_adaptive(vs_ext[0].y, u_level.x, u_threshold.y);
+            if (u_adaptive == 1) {
+                gl_TessLevelOuter[0] = pl_adaptive(len[0], L, u_threshold.y);
+                gl_TessLevelOuter[1] = pl_adaptive(len[1], L, u_threshold.x);
+                gl_TessLevelOuter[2] = pl_adaptive(len[2], L, u_threshold.y);
+                gl_TessLevelOuter[3] = pl_adaptive(len[3], L, u_threshold.x);
+                gl_TessLevelInner[0] = pl_adaptive(vs_ext[0].x, u_level.x, u_threshold.x);
+                gl_TessLevelInner[1] = pl_adaptive(vs_ext[0].y, u_level.x, u_threshold.y);
+            }
         } else {
             gl_TessLevelOuter[0] = u_level.y; gl_TessLevelOuter[1] = u_level.y;
             gl_TessLevelOuter[2] = u_level.y; gl_TessLevelOuter[3] = u_level.y;

@@ -241,7 +241,14 @@ CLUSTER = Record(
     ], struct="Cluster",
     constants=[Constant("CLUSTER_MAX_TRIANGLES", 128, True, "triangles per cluster at most")])
 
-RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH, CLUSTER)
+GRID_VERTEX = Record(
+    "grid vertex", "a vertex of the grid tessellator (kernels/tess/grid.cl), drawn by tess/grid_vertex.glsl", [
+        Field("pos", FLOAT, 4, "world position; w: 1 where f is NaN/inf (the fragment stage drops its triangles)"),
+        Field("normal", FLOAT, 3, "world normal, not normalized"),
+        Field("inst", UINT, 1, "the instance"),
+    ], struct="GridVertex")
+
+RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH, CLUSTER, GRID_VERTEX)
 
 # Constants the host and the kernels share that belong to no record: work-group sizes the host
 # launches with and the kernels declare (reqd_work_group_size, __local arrays).

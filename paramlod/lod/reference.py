@@ -46,7 +46,7 @@ def world_positions(scene_inst, functions, inst, u, v):
     return w, bad
 
 
-def _project(w, bad, cam):
+def screen_samples(w, bad, cam):
     """Screen position, state (0 front, 1 behind near plane, 2 bad) and outcode, per sample, of
     world positions ``w`` seen by one camera record."""
     shape = bad.shape
@@ -196,7 +196,7 @@ def _measure(patches, scene_inst, functions, cam, curve_cos=F(-2)) -> dict:
     world = (world_positions(scene_inst, functions, ii, ru, rv), world_positions(scene_inst, functions, ii, cu, cv),
              world_positions(scene_inst, functions, np.broadcast_to(inst[:, None, None], (n, 5, 5)), gu, gv))
     turns = np.concatenate([line_turns(*world[0], curve_cos), line_turns(*world[1], curve_cos)], axis=1)   # (n, 8)
-    per_view = [_view_measures(*(_project(w, bad, c) for w, bad in world), turns) for c in camera_rows(cam)]
+    per_view = [_view_measures(*(screen_samples(w, bad, c) for w, bad in world), turns) for c in camera_rows(cam)]
     return {k: np.stack([pv[k] for pv in per_view]) for k in per_view[0]}
 
 

@@ -56,7 +56,7 @@ from paramlod import kernels
 from paramlod.core.camera import Camera
 from paramlod.core.frame import Frame
 from paramlod.core.views import MAX_VIEWS, Views, as_views
-from paramlod.core.layouts import RENDER_PATCH, glsl_prelude, vertex_format
+from paramlod.core.layouts import GRID_VERTEX, RENDER_PATCH, glsl_prelude, vertex_format
 from paramlod.device.context import cl_device, gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import FunctionError, SceneError
@@ -70,6 +70,7 @@ from paramlod.renderers.gl_targets import (GL_MAX_GEOMETRY_SHADER_INVOCATIONS, G
                                            effective_aa, gl_limit, gl_matrix, max_samples, resolve_program, targets_for)
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.shading import LIGHT
+from paramlod.renderers.tess_grid import GridTessellator
 from paramlod.scene.scene import Scene
 
 # Highest tessellation level allowed: GL_MAX_TESS_GEN_LEVEL is at least 64 on every GL 4.x device.
@@ -90,6 +91,9 @@ MAX_INVOCATIONS = 32
 VIEW_FLOATS = 36   # a PlViews record (kernels/tess/tess_views.glsl, std140): view, proj, near (vec4)
 COLOR_BY = ("material", "tier")   # TessSettings.color_by
 HYBRID_TARGETS = ("tiers", "pair", "finest")   # TessSettings.hybrid_targets
+TESSELLATORS = ("auto", "hardware", "grid")     # TessSettings.tessellator
+LEVEL_MODES = ("fixed", "adaptive", "chord")    # TessSettings.mode, by the control stage's u_adaptive
+GRID_FORMAT = vertex_format(GRID_VERTEX, ("pos", "normal", "inst"))   # "4f 3f 1u"
 # TessSettings.detail_levels: the threshold divisors of the spot check's tiers 0, 1, 2 (the pixel of
 # 8xMS and of 4xSS+8xMS: the detail each tier's spot check looks for)
 DETAIL_DIVISORS = (1.0, math.sqrt(8.0), math.sqrt(32.0))
@@ -104,7 +108,13 @@ class TessSettings:
 
     mode "adaptive": l = clamp(e * L / min(t, L), l_min, l_max) per level, with L = ``base_level``,
     t the effective LOD threshold and e the patch's measured extent (inner levels) or the screen
-    length of the edge itself (outer levels). mode "fixed": ``levels`` = (inner, outer).
+    length of the edge itself (outer levels). mode "fixed": ``levels`` = (inner, outer). mode
+    "chord" (one view a pass): as few equal segments as keep every chord within ``chord_px``
+    pixels of the surface on the screen, from how far 8 samples of each edge (outer levels) and of
+    the 6 parameter lines between two edges (inner levels, at least the edges') bend, clamped to
+    [l_min, l_max]: a smooth surface gets a few large triangles where "adaptive" makes them a
+    pixel long (the framed torus of the peers bench: 6,000 triangles instead of 900,000 at the
+    same silhouette, docs/tessellation.md).
     ``overlap``: each patch's parameter range is widened by this fraction per side (within the
     domain), which covers T-junctions between patches of different size.
 
@@ -134,6 +144,16 @@ class TessSettings:
     targets: a thin SH lobe on a glyph of 20 pixels gets the segments it needs (docs/hybrid.md,
     "Detail levels"). Off by default: a field of thousands of small glyphs sends nearly every
     patch on, measured up to three times and tessellated up to 5.7 times as finely.
+
+    ``tessellator``: "hardware", GL's tessellation stages; "grid", the patches tessellated in
+    OpenCL with the same levels rounded up to whole segments (equal spacing, so ``spacing`` does
+    not apply) and drawn as triangles (``paramlod.renderers.tess_grid``; one view a pass, so not
+    with ``views_per_pass`` above 1); "auto" (default): the grid on Mesa's llvmpipe for mode
+    "chord", hardware otherwise. llvmpipe runs the tessellation stages on one thread, so the
+    grid pays where evaluating the function is the cost (the peers bench's glyph fields drew
+    1.4x faster with "adaptive", 2x with "chord"), but where a pixel-sized tessellation makes
+    rasterizing the cost it adds its copies to the same raster time (the framed torus with
+    "adaptive": 147 ms a frame in hardware, 214 ms with the grid; docs/tessellation.md).
     """
 
     mode: str = "adaptive"
@@ -149,10 +169,14 @@ class TessSettings:
     color_by: str = "material"
     hybrid_targets: str = "tiers"
     detail_levels: bool = False
+    tessellator: str = "auto"
+    chord_px: float = 0.25
 
     def validate(self):
-        if self.mode not in ("adaptive", "fixed"):
-            raise SceneError(f"tess mode must be 'adaptive' or 'fixed', got {self.mode!r}")
+        if self.mode not in LEVEL_MODES:
+            raise SceneError(f"tess mode must be one of {', '.join(LEVEL_MODES)}, got {self.mode!r}")
+        if not (isinstance(self.chord_px, (int, float)) and 0.01 <= self.chord_px <= 100):
+            raise SceneError(f"tess chord_px must be a number of pixels in [0.01, 100], got {self.chord_px!r}")
         if self.spacing not in SPACINGS:
             raise SceneError(f"tess spacing must be one of {', '.join(SPACINGS)}, got {self.spacing!r}")
         try:
@@ -175,6 +199,14 @@ class TessSettings:
             raise SceneError(f"tess color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
         if not isinstance(self.detail_levels, (bool, np.bool_)):
             raise SceneError(f"tess detail_levels must be true or false, got {self.detail_levels!r}")
+        if self.tessellator not in TESSELLATORS:
+            raise SceneError(f"tess tessellator must be one of {', '.join(TESSELLATORS)}, got {self.tessellator!r}")
+        if self.tessellator == "grid" and k > 1:
+            raise SceneError("tess tessellator 'grid' draws one view a pass; set views_per_pass to 1 or the "
+                             "tessellator to 'hardware'")
+        if self.mode == "chord" and k > 1:
+            raise SceneError("tess mode 'chord' measures one view a pass; set views_per_pass to 1 or the mode to "
+                             "'adaptive'")
         if self.hybrid_targets not in HYBRID_TARGETS:
             raise SceneError(f"tess hybrid_targets must be one of {', '.join(HYBRID_TARGETS)}, "
                              f"got {self.hybrid_targets!r}")
@@ -201,13 +233,21 @@ def _program(ctx, stages: dict, functions) -> object:
             f"{', stage: ' + stage if stage else ''}).\n{shown}\ncompiler said:\n{log[-2000:]}") from None
 
 
-def build_programs(ctx, functions, spacing: str, invocations: int = 0):
+def build_programs(ctx, functions, spacing: str, invocations: int = 0, grid: bool = False):
     """The tessellation program for ``functions``, cached: the single-view one, or with
-    ``invocations`` > 0 the multi-view one whose geometry stage draws that many views a draw."""
+    ``invocations`` > 0 the multi-view one whose geometry stage draws that many views a draw; with
+    ``grid`` the grid tessellator's (a vertex and the fragment stage, for triangles made in OpenCL)."""
     functions = list(functions)
     # keyed by the function objects: generating the GLSL again just to look it up cost ~150 ms a
     # frame for an order-12 SH glyph
     programs = gl_cache(ctx).setdefault("tess_programs", {})
+    if grid:
+        key = (tuple(functions), "grid")
+        if key not in programs:
+            programs[key] = _program(ctx, {"vertex_shader": _stage({}, [kernels.source("tess/grid_vertex.glsl")]),
+                                           "fragment_shader": _stage({}, [kernels.source("tess/tess_fragment.glsl")])},
+                                     functions)
+        return programs[key]
     key = (tuple(functions), spacing) if not invocations else (tuple(functions), spacing, invocations)
     progs = programs.get(key)
     if progs is None:
@@ -245,6 +285,8 @@ def vertex_bound(ext: np.ndarray, settings: TessSettings, threshold) -> np.ndarr
     if settings.mode == "fixed":
         inner, outer = (np.full(len(ext), float(x)) for x in settings.levels)
         lu = lv = inner
+    elif settings.mode == "chord":
+        lu = lv = outer = np.full(len(ext), float(settings.l_max))
     else:
         L = float(settings.base_level)
         lu, lv = (np.clip(np.nan_to_num(ext[:, a] * L / min(float(t), L), nan=settings.l_min),
@@ -276,6 +318,10 @@ class TessRenderer:
         # multi-view frames: their layered targets and the views' records (geometry-stage passes)
         self._layered: LayeredGLTargets | None = None
         self._views = c.buffer(reserve=MAX_VIEWS * VIEW_FLOATS * 4)
+        # the grid tessellator (TessSettings.tessellator): made when first used; its triangles
+        self._grid: GridTessellator | None = None
+        self._grid_vertices = GrowBuffer(c, 1 << 20)
+        self._grid_indices = GrowBuffer(c, 1 << 20)
 
     @property
     def max_samples(self) -> int:
@@ -290,6 +336,16 @@ class TessRenderer:
         """(requested, effective, warnings): the multisample count capped to the device."""
         return effective_aa(self.ctx, mode)
 
+    @cached_property
+    def llvmpipe(self) -> bool:
+        return "llvmpipe" in str(self.ctx.info.get("GL_RENDERER", "")).lower()
+
+    def tessellator(self, settings: TessSettings) -> str:
+        """The tessellator a draw with ``settings`` uses: "hardware" or "grid"."""
+        if settings.tessellator == "auto":
+            return "grid" if self.llvmpipe and settings.mode == "chord" else "hardware"
+        return settings.tessellator
+
     def draw_batches(self, patches: np.ndarray, settings: TessSettings, threshold) -> list[tuple[int, int]]:
         """(first, count) of each draw call for the render records ``patches``, drawn with the
         effective thresholds ``threshold``. One call draws everything, except on Mesa's llvmpipe
@@ -298,7 +354,7 @@ class TessRenderer:
         n = len(patches)
         if not n:
             return []
-        if "llvmpipe" not in str(self.ctx.info.get("GL_RENDERER", "")).lower():
+        if not self.llvmpipe:
             return [(0, n)]
         ends = np.cumsum(vertex_bound(patches["ext"], settings, threshold))
         batches, first = [], 0
@@ -396,10 +452,10 @@ class TessRenderer:
         set_uniform(prog, "u_threshold", threshold)
         if settings.mode == "fixed":
             set_uniform(prog, "u_level", tuple(float(x) for x in settings.levels))
-            set_uniform(prog, "u_adaptive", 0)
         else:
             set_uniform(prog, "u_level", (float(settings.base_level), float(settings.base_level)))
-            set_uniform(prog, "u_adaptive", 1)
+        set_uniform(prog, "u_adaptive", LEVEL_MODES.index(settings.mode))
+        set_uniform(prog, "u_chord", float(settings.chord_px))
         set_uniform(prog, "u_clamp", (float(settings.l_min), float(settings.l_max)))
         set_uniform(prog, "u_overlap", float(settings.overlap))
         set_uniform(prog, "u_light", tuple(float(x) for x in LIGHT))
@@ -408,8 +464,7 @@ class TessRenderer:
             b.buf.bind_to_storage_buffer(binding)
         self._counters.bind_to_storage_buffer(4)
 
-    @staticmethod
-    def _stats(ctx, size, req, aa, settings, threshold, n, notes) -> dict:
+    def _stats(self, ctx, size, req, aa, settings, threshold, n, notes) -> dict:
         """The stats of a draw that do not depend on what it drew."""
         return {
             "device": ctx.info.get("GL_RENDERER"),
@@ -423,6 +478,7 @@ class TessRenderer:
             "samples_per_pixel": aa.samples_per_pixel,
             "lod_divisor": aa.divisor(settings.msaa_lod),
             "threshold": list(threshold),
+            "tessellator": self.tessellator(settings),
             "tess": {"mode": settings.mode, "spacing": settings.spacing, "levels": list(settings.levels),
                      "base_level": settings.base_level, "l_min": settings.l_min, "l_max": settings.l_max,
                      "overlap": settings.overlap, "color_by": settings.color_by},
@@ -430,10 +486,20 @@ class TessRenderer:
             "warnings": notes,
         }
 
-    def _draw_list(self, prog, patches, settings, threshold, passes=(None,), before=None, start=0):
+    def _draw_list(self, prog, patches, settings, threshold, passes=(None,), before=None, start=0, camera=None,
+                   scene=None, chord=None):
         """Draw the uploaded records ``patches`` (from record ``start`` on) with ``prog`` and the
         thresholds ``threshold`` once per pass (``before(pass)`` sets each up); returns (a
-        primitives query per pass, none without patches; draw calls)."""
+        primitives query per pass, none without patches; draw calls). ``chord``: mode "chord"'s
+        error in output pixels for these patches (the targets' pixel, as the thresholds are
+        divided; default ``settings.chord_px``). With the grid tessellator (one view: the
+        ``scene`` seen by ``camera``) ``prog`` is the grid program and the records are
+        tessellated in OpenCL first."""
+        if chord is not None:
+            set_uniform(prog, "u_chord", float(chord))
+            settings = replace(settings, chord_px=float(chord))
+        if camera is not None and self.tessellator(settings) == "grid":
+            return self._draw_grid(prog, patches, settings, threshold, scene, camera)
         queries, draw_calls = [], 0
         batches = self.draw_batches(patches, settings, threshold)
         if batches:
@@ -448,6 +514,32 @@ class TessRenderer:
                         vao.render(mode=moderngl.PATCHES, vertices=count, first=start + first)
                         draw_calls += 1
         return queries, draw_calls
+
+    def _draw_grid(self, prog, patches, settings, threshold, scene, camera):
+        """``_draw_list`` with the grid tessellator: the triangles of ``patches`` in one draw; the
+        NaN vertices it found are added to the counters the evaluation stage would have counted."""
+        if not len(patches):
+            return [], 0
+        if self._grid is None:
+            self._grid = GridTessellator(self.functions)
+        grid = self._grid.tessellate(patches, scene, camera, settings, threshold)
+        self._grid_vertices.write(grid.vertices.tobytes())
+        self._grid_indices.write(grid.indices.tobytes())
+        if grid.nan_vertices:
+            counted = np.frombuffer(self._counters.read(4), np.uint32)[0]
+            self._counters.write(np.uint32(counted + grid.nan_vertices).tobytes())
+        key = ("grid", id(prog), self._grid_vertices.generation, self._grid_indices.generation)
+        vao = self._vaos.get(key)
+        if vao is None:
+            for k in [k for k in self._vaos if k[:2] == key[:2]]:   # made for a released buffer
+                self._vaos.pop(k).release()
+            vao = self._vaos[key] = self.ctx.vertex_array(
+                prog, [(self._grid_vertices.buf, GRID_FORMAT, "in_pos", "in_normal", "in_inst")],
+                index_buffer=self._grid_indices.buf, index_element_size=4)
+        query = self.ctx.query(primitives=True)
+        with query:
+            vao.render(mode=moderngl.TRIANGLES, vertices=len(grid.indices))
+        return [query], 1
 
     def _read_frame(self, tg, scene, msaa, notes) -> tuple[Frame, int, int, float, float]:
         """Resolve ``tg`` and read it back: (Frame, the samples per pixel the device allocated,
@@ -488,7 +580,8 @@ class TessRenderer:
         notes = list(notes)   # this draw's own (a multi-view frame draws several)
         ctx = self.ctx
         t0 = time.perf_counter()
-        prog = build_programs(ctx, self.functions, settings.spacing)
+        grid = self.tessellator(settings) == "grid"
+        prog = build_programs(ctx, self.functions, settings.spacing, grid=grid)
         resolve_program(ctx, aa.ss, aa.msaa)   # compiled with the setup (targets_for reuses it)
         w, h = camera.size
         tg = self._targets_for((w, h), aa.ss, aa.msaa)
@@ -511,11 +604,13 @@ class TessRenderer:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         queries, draw_calls, start = [], 0, 0
+        div = aa.divisor(settings.msaa_lod)
         for k, count in enumerate(counts):
             thr = (tu / DETAIL_DIVISORS[k], tv / DETAIL_DIVISORS[k])
             if k:
                 set_uniform(prog, "u_threshold", thr)
-            q, calls = self._draw_list(prog, render_list[start:start + int(count)], settings, thr, start=start)
+            q, calls = self._draw_list(prog, render_list[start:start + int(count)], settings, thr, start=start,
+                                       camera=camera, scene=scene, chord=settings.chord_px / (div * DETAIL_DIVISORS[k]))
             queries, draw_calls, start = queries + q, draw_calls + calls, start + int(count)
         triangles = sum(int(q.primitives) for q in queries)
         ctx.finish()
@@ -560,7 +655,8 @@ class TessRenderer:
         counts = np.bincount(tier, minlength=len(modes))
         starts = np.cumsum(counts) - counts   # each tier's first record in the ordered list
         drawn = [k for k in range(len(modes)) if counts[k]] or [0]
-        prog = build_programs(ctx, self.functions, settings.spacing)
+        grid = self.tessellator(settings) == "grid"
+        prog = build_programs(ctx, self.functions, settings.spacing, grid=grid)
         w, h = camera.size
         # each tier drawn into its own targets, or (hybrid_targets) into the finest drawn tier's
         shared = {"tiers": (), "pair": tuple(drawn[1:]), "finest": tuple(drawn)}[settings.hybrid_targets]
@@ -595,7 +691,8 @@ class TessRenderer:
             ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
             first = int(starts[k])
             queries, calls = self._draw_list(prog, ordered[first:first + int(counts[k])], settings,
-                                             tuple(tiers[k]["threshold"]), start=first)
+                                             tuple(tiers[k]["threshold"]), start=first, camera=camera, scene=scene,
+                                             chord=settings.chord_px / divisors[k])
             tiers[k]["triangles"] = sum(int(q.primitives) for q in queries)
             draw_calls += calls
             ctx.finish()
@@ -679,6 +776,7 @@ class TessRenderer:
         drawn = [int(q.primitives) for q in queries]
         nan_vertices = int(np.frombuffer(self._counters.read(4), np.uint32)[0])
         shared = self._stats(ctx, (w, h), req, aa, settings, (tu, tv), n, notes)
+        shared["tessellator"] = "hardware"   # a geometry stage after GL's tessellation stages
         shared.update({"triangles": sum(drawn), "draw_calls": draw_calls, "nan_vertices": nan_vertices,
                        "views": n_views, "views_per_pass": invocations, "passes": passes})
         frames, per_view = [], []

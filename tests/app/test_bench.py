@@ -39,6 +39,16 @@ def test_bench_measures_points_with_centre_coverage(tmp_path):
     assert 0.8 * plain["pixels_written"] < centre["pixels_written"] < plain["pixels_written"]
 
 
+def test_bench_measures_tess_with_the_grid_and_chord_levels(tmp_path):
+    assert main(["bench", "sphere", "--variants", "tess", "tess-grid", "tess-chord", "--size", "64x48", "--distances",
+                 "1", "--frames", "2", "--warmup", "1", "--out", str(tmp_path)]) == 0
+    v = json.loads((tmp_path / "results.json").read_text())["scenarios"]["sphere"]["variants"]
+    tess, grid, chord = (v[k][0] for k in ("tess", "tess-grid", "tess-chord"))
+    assert tess["render_patches"] == grid["render_patches"] == chord["render_patches"]
+    # a sphere of 48 px: chords within 0.25 px need far fewer triangles than 1-pixel segments
+    assert 0 < chord["triangles"] * 4 < grid["triangles"]
+
+
 def test_bench_names_unknown_scenarios(tmp_path, capsys):
     assert main(["bench", "teapot", "--out", str(tmp_path)]) == 2
     assert "unknown scenario(s) teapot" in capsys.readouterr().err

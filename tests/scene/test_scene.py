@@ -88,7 +88,21 @@ def test_scene_file_hybrid_settings(tmp_path):
     assert f.stats["tiers"] == [1, 4, 16] and f.coverage.sum() > 200
 
 
+def test_scene_file_chord_levels_and_tessellator(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text(SCENE.replace("threshold = 60", 'threshold = 60\nvariant = "tess"\nlevels = "chord"\nchord_px = 0.5\n'
+                                                 'tessellator = "grid"\nl_min = 1'))
+    sf = load_scene(p)
+    ts = sf.settings.tess
+    assert (ts.mode, ts.chord_px, ts.tessellator, ts.l_min) == ("chord", 0.5, "grid", 1)
+    f = pl.render(sf.scene, sf.camera, variant=sf.variant, settings=sf.settings)
+    assert f.stats["tessellator"] == "grid" and f.coverage.sum() > 200
+
+
 @pytest.mark.parametrize("text,expect", [
+    (SCENE.replace("threshold = 60", 'threshold = 60\ntessellator = "cpu"'), r"render.tessellator: tess tessellator must"),
+    (SCENE.replace("threshold = 60", "threshold = 60\nchord_px = 0"), r"render.chord_px: must be a number in \[0.01, 100\]"),
+    (SCENE.replace("threshold = 60", 'threshold = 60\nlevels = "curvy"'), r'render.levels: must be "adaptive", "chord"'),
     (SCENE.replace("threshold = 60", 'threshold = 60\ncolor_by = "tiers"'), r"render.color_by: points color_by must"),
     (SCENE.replace("threshold = 60", 'threshold = 60\ncoverage = "center"'), r"render.coverage: points coverage must"),
     (SCENE.replace("threshold = 60", "threshold = 60\nspot_angle = 200"), r"render.spot_angle"),

@@ -40,6 +40,7 @@ from scipy.spatial import cKDTree
 import trimesh
 
 from paramlod.app.args import parse_size, positive_float, positive_int
+from paramlod.app.bench.scenes import apply_variant_settings
 from paramlod.core.camera import Camera
 from paramlod.core.files import write_atomically
 from paramlod.dmri.sh import fibonacci_sphere, sh_matrix
@@ -294,8 +295,10 @@ def reference_silhouette(spec: dict, field=None) -> tuple[np.ndarray, dict]:
 
 
 # --- paramlod ------------------------------------------------------------------------------------------
-# paramlod's rows: its variants, and the points with pixel-centre coverage (PointSettings.coverage)
-PARAMLOD_ROWS = {"points": ("points", "pixel"), "points-centre": ("points", "centre"), "tess": ("tess", "pixel")}
+# paramlod's rows -> their renderer: its variants and bench variants with their own settings
+# (paramlod.app.bench.scenes.VARIANT_SETTINGS: the points with pixel-centre coverage, tess with the
+# grid tessellator, tess with chord levels)
+PARAMLOD_ROWS = {"points": "points", "points-centre": "points", "tess": "tess", "tess-grid": "tess", "tess-chord": "tess"}
 
 
 def paramlod_render_row(spec: dict, variant: str, frames: int, warmup: int = 1, field=None,
@@ -307,7 +310,8 @@ def paramlod_render_row(spec: dict, variant: str, frames: int, warmup: int = 1, 
     rs = RenderSettings()
     rs.lod.threshold = (threshold, threshold)
     rs.tess.l_max, rs.tess.l_min = 64.0, 8.0   # the thesis's, as in paramlod.app.bench.scenes
-    label, (variant, rs.points.coverage) = variant, PARAMLOD_ROWS[variant]
+    label, variant = variant, PARAMLOD_ROWS[variant]
+    apply_variant_settings(rs, label)
     times, frame = [], None
     for k in range(warmup + frames):
         t0 = time.perf_counter()

@@ -41,7 +41,7 @@ from paramlod.app.bench.plots import pyplot, save_figure
 from paramlod.app.bench.peers import add_arguments as add_peers_arguments, format_peers_markdown, run_peers
 from paramlod.app.bench.skinned import format_skinned, run_skinned
 from paramlod.app.bench.viewer import format_viewer, run_viewer
-from paramlod.app.bench.scenes import DEFAULT, SCENARIOS
+from paramlod.app.bench.scenes import DEFAULT, SCENARIOS, apply_variant_settings
 from paramlod.core.camera import Camera
 from paramlod.core.files import write_atomically
 from paramlod.device.context import cl_device
@@ -62,9 +62,8 @@ from paramlod.surfels.render import FixedCount, default_camera, render_surfels
 # key buffers, points-ssaa the thesis's local-framebuffer 4xSS
 VARIANTS = {"points": ("points", None), "points-4xSS": ("points", "4xSS"), "points-ssaa": ("points-ssaa", None),
             "tess": ("tess", "noAA"), "tess-4xSS+8xMS": ("tess", "4xSS+8xMS"),
-            "points-hybrid": ("points", "hybrid"), "tess-hybrid": ("tess", "hybrid"), "points-centre": ("points", None)}
-# bench variants drawn with pixel-centre coverage (PointSettings.coverage, docs/points.md)
-CENTRE_COVERAGE = ("points-centre",)
+            "points-hybrid": ("points", "hybrid"), "tess-hybrid": ("tess", "hybrid"), "points-centre": ("points", None),
+            "tess-grid": ("tess", "noAA"), "tess-chord": ("tess", "noAA")}   # their own settings: VARIANT_SETTINGS
 DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8xMS"]
 NO_CULLING = "(no culling)"   # the label of rows measured with --culling off / both
 
@@ -193,15 +192,16 @@ def _device_buffers_mib(scene, size, ss=(1,)) -> float:
 
 
 def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling: bool = True,
-            coverage: str = "pixel"):
+            name: str = ""):
+    """Frames of bench variant ``name`` (renderer ``variant``, AA mode ``aa``, its VARIANT_SETTINGS)."""
     rs = RenderSettings()
-    rs.points.coverage = coverage
     rs.lod.threshold = (threshold, threshold)
     rs.lod.detail_angle = args.detail_angle
     if not culling:   # on: the defaults (occlusion "auto", back faces of one-sided materials)
         rs.points.occlusion = rs.lod.backface_cull = False
     rs.tess.l_max = l_max
     rs.tess.l_min = l_min
+    apply_variant_settings(rs, name)
     if aa:
         rs.apply_aa(aa, variant=variant)
     # the point variants run frame after frame without copying each to the host, as an
@@ -347,7 +347,7 @@ def run_bench(args) -> int:
                 for dist in args.distances:
                     try:
                         r = measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_min, size, culling,
-                                    "centre" if vname in CENTRE_COVERAGE else "pixel")
+                                    vname)
                     except ParamlodError as exc:
                         r = {"distance": dist, "error": str(exc)}
                     rows.append(r)

@@ -12,6 +12,20 @@ from paramlod.functions.yarn import yarn_curtain as build_yarn_curtain
 from paramlod.scene.scene import Material, Scene
 
 
+# bench variants drawn with other settings than their renderer's defaults: (settings part, field) -> value
+VARIANT_SETTINGS = {
+    "points-centre": {("points", "coverage"): "centre"},                   # docs/points.md, "Pixel-centre coverage"
+    "tess-grid": {("tess", "tessellator"): "grid"},                         # docs/tessellation.md, "The grid tessellator"
+    "tess-chord": {("tess", "mode"): "chord", ("tess", "l_min"): 1.0},      # docs/tessellation.md, "Chord levels"
+}
+
+
+def apply_variant_settings(settings, name: str) -> None:
+    """Set bench variant ``name``'s own settings (VARIANT_SETTINGS) in the RenderSettings ``settings``."""
+    for (part, field), value in VARIANT_SETTINGS.get(name, {}).items():
+        setattr(getattr(settings, part), field, value)
+
+
 def _glyph_coeffs(order: int, count: int, seed: int = 0) -> np.ndarray:
     """Deterministic star-shaped glyphs: the library's default glyph plus band-limited noise."""
     k = coefficient_count(order)
