@@ -286,7 +286,8 @@ def test_small_draw_batches_draw_the_same_frame(monkeypatch):
             assert count == 1 or bound[first:first + count].sum() <= tess.LLVMPIPE_VERTEX_BUDGET
 
 
-def test_nan_vertices_are_dropped_and_counted():
+@pytest.mark.parametrize("tessellator", ["hardware", "grid"])
+def test_nan_vertices_are_dropped_and_counted(tessellator):
     @pl.parametric(u=(-1, 1), v=(-1, 1))
     def cap(u, v):
         return u, v, sp.sqrt(0.8 - u ** 2 - v ** 2)   # NaN in the corners of the domain
@@ -294,8 +295,8 @@ def test_nan_vertices_are_dropped_and_counted():
     scene = pl.Scene()
     scene.add(cap)
     cam = pl.Camera.look_at((0, 0, 4), (0, 0, 0), size=(64, 64))
-    f = render_tess(scene, cam)
-    assert f.stats["nan_vertices"] > 0
+    f = render_tess(scene, cam, TessSettings(tessellator=tessellator))
+    assert f.stats["tessellator"] == tessellator and f.stats["nan_vertices"] > 0
     assert f.coverage.sum() > 100
     assert np.all(np.isfinite(f.color)) and not np.any(np.isnan(f.depth))
 

@@ -3,7 +3,6 @@ levels: the kernels against their numpy twin, the triangles' tiling and shared e
 against GL's tessellation stages, and the settings' errors."""
 import numpy as np
 import pytest
-import sympy as sp
 from conftest import iou
 
 import paramlod as pl
@@ -154,20 +153,6 @@ def test_chord_levels_keep_the_silhouette_with_far_fewer_triangles():
         assert chord.stats["triangles"] * 20 < fine.stats["triangles"]
         coarse = frame(scene, cam, mode="chord", chord_px=8.0, l_min=1.0)
         assert coarse.stats["triangles"] < chord.stats["triangles"]
-
-
-def test_nan_vertices_are_dropped_and_counted():
-    @pl.parametric(u=(-1, 1), v=(-1, 1))
-    def cap(u, v):
-        return u, v, sp.sqrt(0.8 - u ** 2 - v ** 2)   # NaN in the corners of the domain
-
-    scene = pl.Scene()
-    scene.add(cap)
-    cam = pl.Camera.look_at((0, 0, 4), (0, 0, 0), size=(64, 64))
-    f = frame(scene, cam, tessellator="grid")
-    assert f.stats["nan_vertices"] > 0
-    assert f.coverage.sum() > 100
-    assert np.all(np.isfinite(f.color)) and not np.any(np.isnan(f.depth))
 
 
 def test_auto_picks_the_grid_for_chord_levels_on_llvmpipe():
