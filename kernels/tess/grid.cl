@@ -77,11 +77,12 @@ inline float grid_chord_level(float bend, float chord, float2 lclamp) {
 }
 
 // One work-item per render patch: its levels record. kind 0 (fixed): rule.xy the (inner, outer)
-// levels; 1 (adaptive): rule (L inner, L outer, t_u, t_v); 2 (chord): rule.x the chord error in
-// pixels, each inner level the larger of the two edges across it. lclamp: (l_min, l_max).
+// levels; 1 (adaptive): rule (L inner, L outer, t_u, t_v), the inner levels from e_u, e_v (or
+// from s_u, s_v where larger, with inner_segment); 2 (chord): rule.x the chord error in pixels,
+// each inner level the larger of the two edges across it. lclamp: (l_min, l_max).
 __kernel void grid_levels(__global const RenderPatch* patches, uint count,
                           __global const float* inst_f, __global const uint* inst_u, __global const float* params,
-                          __global const float* cam, float4 rule, float2 lclamp, uint kind,
+                          __global const float* cam, float4 rule, float2 lclamp, uint kind, uint inner_segment,
                           __global int8* levels) {
     uint p = get_global_id(0);
     if (p >= count) return;
@@ -100,8 +101,9 @@ __kernel void grid_levels(__global const RenderPatch* patches, uint count,
                                             : grid_chord_level(m.y, rule.x, lclamp));
         }
         if (kind == 1u) {
-            a = grid_segments(grid_level(rp.ext.x, rule.x, rule.z, lclamp));
-            b = grid_segments(grid_level(rp.ext.y, rule.x, rule.w, lclamp));
+            float2 e = inner_segment ? fmax(rp.ext.xy, rp.ext.zw) : rp.ext.xy;
+            a = grid_segments(grid_level(e.x, rule.x, rule.z, lclamp));
+            b = grid_segments(grid_level(e.y, rule.x, rule.w, lclamp));
         } else {   // the lines between the edges, 1/7 of the patch apart: the bend inside
             float bend_u = 0.0f, bend_v = 0.0f;
             for (int k = 1; k < GRID_EDGE_SAMPLES - 1; ++k) {

@@ -2,7 +2,8 @@
 // (docs/tessellation.md).
 //   fixed:    inner = u_level.x on both axes, outer = u_level.y on all four edges
 //   adaptive: l = clamp(e * L / min(t, L), l_min, l_max) (thesis 5.5.2), with
-//             inner 0 (along u) from the LOD stage's e_u, inner 1 (along v) from e_v, and each
+//             inner 0 (along u) from the LOD stage's e_u, inner 1 (along v) from e_v (or from
+//             s_u, s_v where larger: TessSettings.inner_measure "segment"), and each
 //             outer level from the screen length of that edge itself, measured here from 8
 //             samples of the edge. Two patches that share an edge measure it from the same
 //             parameters, so they compute the same outer level and their vertices on it coincide.
@@ -33,6 +34,7 @@ uniform vec2 u_level;        // fixed: (inner, outer); adaptive: base level L fo
 uniform vec2 u_clamp;        // l_min, l_max
 uniform int u_adaptive;     // 0 fixed, 1 adaptive, 2 chord
 uniform float u_chord;       // chord: the most a chord may stray from the surface, pixels
+uniform int u_inner_segment; // adaptive: inner levels from s_u, s_v where larger (TessSettings.inner_measure)
 uniform float u_near;
 uniform float u_overlap;
 
@@ -164,8 +166,9 @@ void main() {
                 gl_TessLevelOuter[1] = pl_adaptive(len[1], L, u_threshold.x);
                 gl_TessLevelOuter[2] = pl_adaptive(len[2], L, u_threshold.y);
                 gl_TessLevelOuter[3] = pl_adaptive(len[3], L, u_threshold.x);
-                gl_TessLevelInner[0] = pl_adaptive(vs_ext[0].x, u_level.x, u_threshold.x);
-                gl_TessLevelInner[1] = pl_adaptive(vs_ext[0].y, u_level.x, u_threshold.y);
+                vec2 e = u_inner_segment != 0 ? max(vs_ext[0].xy, vs_ext[0].zw) : vs_ext[0].xy;
+                gl_TessLevelInner[0] = pl_adaptive(e.x, u_level.x, u_threshold.x);
+                gl_TessLevelInner[1] = pl_adaptive(e.y, u_level.x, u_threshold.y);
             }
         } else {
             gl_TessLevelOuter[0] = u_level.y; gl_TessLevelOuter[1] = u_level.y;

@@ -35,8 +35,8 @@ TOP_KEYS = {"camera", "render", "objects", "meta", "animation", "camera_path"}  
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches", "patch_budget",
                "detail_angle", "spot_angle", "spot_share", "color_by", "coverage",
-               "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "chord_px", "tessellator", "mesh_threshold",
-               "mesh_color_by"}
+               "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "chord_px", "tessellator", "inner_measure",
+               "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "two_sided", "translate", "rotate", "scale", "matrix", "variant",
                "instances", "sh_field", "surfels", "mesh", "lod", "skinned", "animation", "time"}
 SOURCE_KEYS = ("function", "mesh", "surfels", "sh_field")   # what an object is made of: one of them (or skinned)
@@ -553,8 +553,9 @@ def _tess_settings(r: dict, ck: _Checker):
         ck.fail("render.levels", f'must be "adaptive", "chord" or [inner, outer], got {levels!r}', "render", None,
                 "levels")
     ts.chord_px = ck.num(r, "chord_px", "render", "render", default=ts.chord_px, lo=0.01, hi=100)
-    if "tessellator" in r:
-        ts.tessellator = r["tessellator"]
+    for key in ("tessellator", "inner_measure"):
+        if key in r:
+            setattr(ts, key, r[key])
     ts.l_min = ck.num(r, "l_min", "render", "render", default=ts.l_min, lo=1, hi=64)
     ts.l_max = ck.num(r, "l_max", "render", "render", default=ts.l_max, lo=1, hi=64)
     if "spacing" in r:
@@ -566,7 +567,8 @@ def _tess_settings(r: dict, ck: _Checker):
     try:
         ts.validate()
     except ParamlodError as exc:
-        key = next((k for k in ("aa", "spacing", "l_min", "l_max", "tessellator") if k in r and k in str(exc)), "aa")
+        key = next((k for k in ("aa", "spacing", "l_min", "l_max", "tessellator", "inner_measure")
+                    if k in r and k in str(exc)), "aa")
         ck.fail(f"render.{key}", str(exc), "render", None, key)
     return ts
 

@@ -77,10 +77,12 @@ def grid_levels(records, scene, camera, settings, threshold) -> tuple[np.ndarray
             else:
                 raw[:, e] = _chord(bend, rule[0], lclamp)
         if kind == 1:
+            ext = records["ext"].astype(np.float32)
+            if settings.inner_measure == "segment":
+                ext[:, :2] = np.maximum(ext[:, :2], ext[:, 2:])
             for k, t in ((0, rule[2]), (1, rule[3])):
                 with np.errstate(invalid="ignore"):
-                    raw[:, 4 + k] = _clamp(records["ext"][:, k].astype(np.float32) * F(rule[0]) / min(F(t), F(rule[0])),
-                                           lclamp)
+                    raw[:, 4 + k] = _clamp(ext[:, k] * F(rule[0]) / min(F(t), F(rule[0])), lclamp)
         else:
             bend_u = np.zeros(p, np.float32)
             bend_v = np.zeros(p, np.float32)

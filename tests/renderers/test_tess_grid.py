@@ -84,7 +84,7 @@ def test_each_patch_is_tiled_by_counter_clockwise_triangles():
     assert np.array_equal(counts, levels[:, 7])
 
 
-@pytest.mark.parametrize("mode", ["adaptive", "chord", "fixed"])
+@pytest.mark.parametrize("mode", ["adaptive", "adaptive-segment", "chord", "fixed"])
 @pytest.mark.parametrize("case", ["torus", "glyphs"])
 def test_levels_match_the_numpy_twin(mode, case):
     if case == "torus":
@@ -93,7 +93,8 @@ def test_levels_match_the_numpy_twin(mode, case):
         scene, cam, _ = (lambda s: (peers.paramlod_scene(s, peers.glyph_field(8, 3)), peers.camera_of(s), s))(
             peers.scene_spec("glyphs8", (240, 240), grid=3))
     records = render_list(scene, cam)
-    settings = TessSettings(mode=mode, l_min=1.0, levels=(5.0, 3.0))
+    mode, _, measure = mode.partition("-")
+    settings = TessSettings(mode=mode, l_min=1.0, levels=(5.0, 3.0), inner_measure=measure or "extent")
     grid = GridTessellator(scene.functions()).tessellate(records, scene, cam, settings, (84.0, 84.0))
     expect, raw = grid_levels(records, scene, cam, settings, (84.0, 84.0))
     differ = (grid.levels != expect).any(axis=1)
@@ -169,6 +170,7 @@ def test_auto_picks_the_grid_for_chord_levels_on_llvmpipe():
     ({"chord_px": 0.0}, "chord_px"),
     ({"tessellator": "grid", "views_per_pass": 4}, "one view a pass"),
     ({"mode": "chord", "views_per_pass": 4}, "one view a pass"),
+    ({"inner_measure": "longest"}, "inner_measure must be one of"),
 ])
 def test_bad_settings_are_named(kwargs, words):
     with pytest.raises(SceneError, match=words):

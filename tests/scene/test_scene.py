@@ -97,10 +97,13 @@ def test_scene_file_chord_levels_and_tessellator(tmp_path):
     assert (ts.mode, ts.chord_px, ts.tessellator, ts.l_min) == ("chord", 0.5, "grid", 1)
     f = pl.render(sf.scene, sf.camera, variant=sf.variant, settings=sf.settings)
     assert f.stats["tessellator"] == "grid" and f.coverage.sum() > 200
+    p.write_text(SCENE.replace("threshold = 60", 'threshold = 60\nvariant = "tess"\ninner_measure = "segment"'))
+    assert load_scene(p).settings.tess.inner_measure == "segment"
 
 
 @pytest.mark.parametrize("text,expect", [
     (SCENE.replace("threshold = 60", 'threshold = 60\ntessellator = "cpu"'), r"render.tessellator: tess tessellator must"),
+    (SCENE.replace("threshold = 60", 'threshold = 60\ninner_measure = "max"'), r"render.inner_measure: tess inner_measure"),
     (SCENE.replace("threshold = 60", "threshold = 60\nchord_px = 0"), r"render.chord_px: must be a number in \[0.01, 100\]"),
     (SCENE.replace("threshold = 60", 'threshold = 60\nlevels = "curvy"'), r'render.levels: must be "adaptive", "chord"'),
     (SCENE.replace("threshold = 60", 'threshold = 60\ncolor_by = "tiers"'), r"render.color_by: points color_by must"),
