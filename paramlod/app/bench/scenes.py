@@ -16,7 +16,8 @@ from paramlod.scene.scene import Material, Scene
 VARIANT_SETTINGS = {
     "points-centre": {("points", "coverage"): "centre"},                   # docs/points.md, "Pixel-centre coverage"
     "tess-grid": {("tess", "tessellator"): "grid"},                         # docs/tessellation.md, "The grid tessellator"
-    "tess-chord": {("tess", "mode"): "chord", ("tess", "l_min"): 1.0},      # docs/tessellation.md, "Chord levels"
+    "tess-chord": {("tess", "mode"): "chord", ("tess", "l_min"): 1.0},      # docs/tessellation.md, "Tessellation levels"
+    "tess-segment": {("tess", "inner_measure"): "segment"},                 # docs/tessellation.md, "Tessellation levels"
 }
 
 
