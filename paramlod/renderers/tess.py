@@ -495,7 +495,8 @@ class TessRenderer:
             "tessellator": self.tessellator(settings),
             "tess": {"mode": settings.mode, "spacing": settings.spacing, "levels": list(settings.levels),
                      "base_level": settings.base_level, "l_min": settings.l_min, "l_max": settings.l_max,
-                     "overlap": settings.overlap, "color_by": settings.color_by},
+                     "overlap": settings.overlap, "color_by": settings.color_by, "chord_px": settings.chord_px,
+                     "inner_measure": settings.inner_measure},
             "render_patches": n,
             "warnings": notes,
         }
