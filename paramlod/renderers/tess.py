@@ -252,8 +252,8 @@ def build_programs(ctx, functions, spacing: str, invocations: int = 0, grid: boo
     # keyed by the function objects: generating the GLSL again just to look it up cost ~150 ms a
     # frame for an order-12 SH glyph
     programs = gl_cache(ctx).setdefault("tess_programs", {})
-    if grid:
-        key = (tuple(functions), "grid")
+    if grid:   # no generated code in it: one program whatever the functions
+        key = "grid"
         if key not in programs:
             programs[key] = _program(ctx, {"vertex_shader": _stage({}, [kernels.source("tess/grid_vertex.glsl")]),
                                            "fragment_shader": _stage({}, [kernels.source("tess/tess_fragment.glsl")])},

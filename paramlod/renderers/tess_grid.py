@@ -31,6 +31,7 @@ from paramlod.renderers.shading import LIGHT
 
 # the columns of a patch's levels record (grid.cl's int8)
 LEVELS = ("n0", "n1", "n2", "n3", "a", "b", "vertices", "triangles")
+VERTICES, TRIANGLES = LEVELS.index("vertices"), LEVELS.index("triangles")
 # most vertices one list may make (32 bytes each: 2 GiB); more is an error that names the way out
 MAX_VERTICES = 1 << 26
 LOCAL_SIZE = 64
@@ -87,26 +88,26 @@ class GridTessellator:
         d = self.buffers.upload(scene, camera)
         n = len(records)
         if not n:
-            return Grid(np.zeros(0, GRID_VERTEX.dtype), np.zeros(0, np.uint32), np.zeros((0, 8), np.int32), 0)
+            return Grid(np.zeros(0, GRID_VERTEX.dtype), np.zeros(0, np.uint32), np.zeros((0, len(LEVELS)), np.int32), 0)
         patches = cla.to_device(q, np.ascontiguousarray(records, RENDER_DTYPE))
         if levels is None:
-            levels = cla.empty(q, 8 * n, np.int32)
+            levels = cla.empty(q, len(LEVELS) * n, np.int32)
             rule, kind = level_rule(settings, threshold)
             self._levels.set_args(patches.data, np.uint32(n), *d["inst"], d["cam"], cltypes.make_float4(*rule),
                                   cltypes.make_float2(float(settings.l_min), float(settings.l_max)),
                                   np.uint32(kind), np.uint32(settings.inner_measure == "segment"), levels.data)
             launch(q, self._levels, (-(-n // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
-            lv = levels.get().reshape(n, 8)
+            lv = levels.get().reshape(n, len(LEVELS))
         else:
-            lv = np.ascontiguousarray(levels, np.int32).reshape(n, 8)
+            lv = np.ascontiguousarray(levels, np.int32).reshape(n, len(LEVELS))
             levels = cla.to_device(q, lv.reshape(-1))
-        n_vertices, n_triangles = int(lv[:, 6].sum()), int(lv[:, 7].sum())
+        n_vertices, n_triangles = int(lv[:, VERTICES].sum()), int(lv[:, TRIANGLES].sum())
         if n_vertices > MAX_VERTICES:
             raise SceneError(f"the grid tessellator would make {n_vertices:,} vertices, more than "
                              f"its limit of {MAX_VERTICES:,} (paramlod.renderers.tess_grid.MAX_VERTICES); raise "
                              "the LOD threshold, lower tess l_max, or use tessellator 'hardware'")
-        vert_start = cla.to_device(q, starts(lv[:, 6]))
-        tri_start = cla.to_device(q, starts(lv[:, 7]))
+        vert_start = cla.to_device(q, starts(lv[:, VERTICES]))
+        tri_start = cla.to_device(q, starts(lv[:, TRIANGLES]))
         vertices = cla.empty(q, n_vertices, GRID_VERTEX.dtype)
         indices = cla.empty(q, 3 * n_triangles, np.uint32)
         nan = cla.zeros(q, 1, np.uint32)

@@ -1,13 +1,14 @@
 """``paramlod bench --peers``: paramlod against the tools its users would use instead, in one run.
 
-Rendering (paramlod points, points with pixel-centre coverage and tess against pyvista/VTK and FURY
-2/pygfx, each peer drawing the same surface as a fixed triangle mesh at several resolutions): the
-20x20 order-8 and order-12 SH glyph fields and the torus, framed and close up. Every row has its
-warm median time per frame (render and read the image back to the host) and its silhouette error,
-1 - IoU of its coverage mask against a reference silhouette computed once per scene: the analytic
-surface tessellated until its triangles are below a pixel on screen, rasterized at pixel centres in
-numpy, with the same camera and size. The "matched error" view gives, per peer, the mesh resolution
-whose error is closest to paramlod's and the time ratio there.
+Rendering (paramlod's rows, PARAMLOD_ROWS: points, also with pixel-centre coverage, and tess, also
+with the grid tessellator and with chord levels, against pyvista/VTK and FURY 2/pygfx, each peer
+drawing the same surface as a fixed triangle mesh at several resolutions): the 20x20 order-8 and
+order-12 SH glyph fields and the torus, framed and close up. Every row has its warm median time per
+frame (render and read the image back to the host) and its silhouette error, 1 - IoU of its coverage
+mask against a reference silhouette computed once per scene: the analytic surface tessellated until
+its triangles are below a pixel on screen, rasterized at pixel centres in numpy, with the same
+camera and size. The "matched error" view gives, per peer, the mesh resolution whose error is
+closest to paramlod's and the time ratio there.
 
 Sampling (paramlod blue surfels against Open3D and pymeshlab Poisson-disk) of the Stanford bunny at
 10k and 100k points: seconds, and evenness (nearest-neighbour distance min / mean / CV, normalised
