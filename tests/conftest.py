@@ -54,15 +54,17 @@ def sphere_scene():
 NOT_VISITED = 0xFFFFFFFE
 
 
-def record_direct_points(settings, size):
-    """A sphere and a torus drawn by the direct point renderer with its recording test hook.
+def record_direct_points(settings, size, scene=None, cam=None):
+    """A sphere and a torus (or ``scene`` seen by ``cam``) drawn by the direct point renderer with
+    its recording test hook.
     Returns (stats, colour keys flattened, each sample's pixel (~0 when dropped, NOT_VISITED if
     the renderer never reached it), each sample's colour key, the sample count the numpy twin of
     the sample counts predicts)."""
-    scene = pl.Scene()
-    scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
-    scene.add("torus", transform=pl.translate(0.8, 0.2, 0.3) @ pl.rotate(70, (1, 0, 0)))
-    cam = pl.Camera.look_at((0.5, 0.8, 3.5), (0.3, 0, 0), size=size)
+    if scene is None:
+        scene = pl.Scene()
+        scene.add("sphere", material=pl.Material(color=(0.9, 0.4, 0.2)))
+        scene.add("torus", transform=pl.translate(0.8, 0.2, 0.3) @ pl.rotate(70, (1, 0, 0)))
+        cam = pl.Camera.look_at((0.5, 0.8, 3.5), (0.3, 0, 0), size=size)
     r = renderer_for(scene)
     dev = r.upload(scene, cam)
     rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings())

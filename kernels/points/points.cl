@@ -182,10 +182,13 @@ inline int point_view(float3 world, float3 n_obj, __global const float* cam, flo
 }
 
 // Evaluate one sample: SAMPLE_NAN, or SAMPLE_DRAWN with its world position and normal direction.
-inline int point_eval(uint func, __global const float* P, __global const float* I, float u, float v,
-                      float3* world, float3* n_obj) {
+// split: 0, or the function's split with C its carried values (pl_surface_axis at the sample's u
+// or v; patch_runs).
+inline int point_eval(uint func, __global const float* P, __global const float* I, uint split, const float* C,
+                      float u, float v, float3* world, float3* n_obj) {
     float3 pos, fu, fv;
-    pl_surface(func, u, v, P, &pos, &fu, &fv);
+    if (split) pl_surface_rest(func, u, v, P, C, &pos, &fu, &fv);
+    else pl_surface(func, u, v, P, &pos, &fu, &fv);
     if (is_bad3(pos)) return SAMPLE_NAN;
     *world = xform_point(I + INST_MODEL, pos);
     *n_obj = xform_dir(I + INST_NORMAL, cross(fu, fv));
@@ -193,10 +196,12 @@ inline int point_eval(uint func, __global const float* P, __global const float* 
 }
 
 // point_eval, also giving the partials df/du, df/dv after the instance transform (world space).
-inline int point_eval_partials(uint func, __global const float* P, __global const float* I, float u, float v,
-                               float3* world, float3* n_obj, float3* tu, float3* tv) {
+inline int point_eval_partials(uint func, __global const float* P, __global const float* I, uint split,
+                               const float* C, float u, float v, float3* world, float3* n_obj, float3* tu,
+                               float3* tv) {
     float3 pos, fu, fv;
-    pl_surface(func, u, v, P, &pos, &fu, &fv);
+    if (split) pl_surface_rest(func, u, v, P, C, &pos, &fu, &fv);
+    else pl_surface(func, u, v, P, &pos, &fu, &fv);
     if (is_bad3(pos)) return SAMPLE_NAN;
     *world = xform_point(I + INST_MODEL, pos);
     *n_obj = xform_dir(I + INST_NORMAL, cross(fu, fv));
@@ -287,7 +292,7 @@ inline int point_sample(uint func, __global const float* P, __global const float
                         __global const float* cam, float4 mat, __global const float* light,
                         uint object_id, float u, float v, float* fx, float* fy, ulong* key, ulong* aux) {
     float3 world, n_obj;
-    if (point_eval(func, P, I, u, v, &world, &n_obj) == SAMPLE_NAN) return SAMPLE_NAN;
+    if (point_eval(func, P, I, 0u, 0, u, v, &world, &n_obj) == SAMPLE_NAN) return SAMPLE_NAN;
     return point_view(world, n_obj, cam, mat, light, object_id, fx, fy, key, aux);
 }
 
@@ -327,11 +332,34 @@ inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* 
 #define CHUNK_BITS 40
 #define CHUNK_MASK ((1ul << CHUNK_BITS) - 1ul)
 
-inline uint patch_chunks(RenderPatch rp, float factor, uint measure, uint max_side) {
+// A patch's samples in runs, one run a work-item (the surface split of paramlod.function.codegen_cl):
+// with a split along u, a work-item evaluates the steps that read only u once for its grid column
+// (pl_surface_axis) and then up to PL_RUN samples down it; along v, the same for a grid row;
+// without a split, runs down the columns too. Lines: the na grid lines along the split's axis;
+// each is cut into `runs` runs of at most `len` of its nb samples. PL_RUN 1 (GPUs): one sample a
+// work-item in row order, evaluated whole (pl_surface): runs were slower on the H200 where
+// placing and testing the samples, not evaluating them, bounds the frame (docs/points.md).
+typedef struct { uint split, na, nb, runs, len; } Runs;
+#ifndef PL_RUN   // set by the host per device (paramlod/renderers/points.py RUN_GPU, RUN_CPU)
+#define PL_RUN 8u
+#endif
+
+inline Runs patch_runs(uint split, uint nu, uint nv) {
+    Runs r;
+    r.split = PL_RUN > 1u ? split : 0u;
+    r.na = r.split == PL_SPLIT_V ? nv : nu;
+    r.nb = r.split == PL_SPLIT_V ? nu : nv;
+    r.runs = (r.nb + PL_RUN - 1u) / PL_RUN;
+    r.len = (r.nb + r.runs - 1u) / r.runs;
+    return r;
+}
+
+inline uint patch_chunks(RenderPatch rp, uint split, float factor, uint measure, uint max_side) {
     float2 m = patch_measure(rp, measure);
     uint nu = grid_axis(rp.ext.z, m.x, measure == 2u, factor, max_side).n;
     uint nv = grid_axis(rp.ext.w, m.y, measure == 2u, factor, max_side).n;
-    return (nu * nv + POINTS_LOCAL - 1u) / POINTS_LOCAL;
+    Runs r = patch_runs(split, nu, nv);
+    return (r.na * r.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
 }
 
 // One work-item per patch: one 64-bit atomic gives the patch both its place in the schedule and
@@ -340,14 +368,16 @@ inline uint patch_chunks(RenderPatch rp, float factor, uint measure, uint max_si
 // are listed (ALL_TIERS: every patch).
 #define ALL_TIERS 0xFFFFFFFFu
 __kernel void points_schedule(__global const RenderPatch* patches, __global const uint* count,
-                              uint count_at, uint capacity, float factor, uint measure,
-                              uint max_side, uint tier, __global ulong* order, __global ulong* counters)
+                              uint count_at, uint capacity, __global const uint* inst_u, float factor,
+                              uint measure, uint max_side, uint tier, __global ulong* order,
+                              __global ulong* counters)
 {
     uint n_patches = min(count[count_at], capacity);
     for (uint pid = get_global_id(0); pid < n_patches; pid += get_global_size(0)) {
         RenderPatch rp = patches[pid];
         if (tier != ALL_TIERS && ((rp.flags >> TIER_SHIFT) & 3u) != tier) continue;
-        ulong k = patch_chunks(rp, factor, measure, max_side);
+        uint split = pl_split(inst_u[rp.inst * INST_U + INST_FUNC]);
+        ulong k = patch_chunks(rp, split, factor, measure, max_side);
         ulong old = atom_add(&counters[SCHED_AT], (1ul << CHUNK_BITS) | k);
         order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
     }
@@ -400,58 +430,65 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
             PointGrid g = point_grid(rp, I, factor, measure, widen, max_side);
             // the views that see the patch (the LOD stage's render_views): the others are skipped
             ulong seen = n_views == 1u ? 1ul : view_masks[pid];
-            uint total_here = g.nu * g.nv;
+            Runs runs = patch_runs(pl_split(func), g.nu, g.nv);
             if (c == first && get_local_id(0) == 0 && (g.nu == max_side || g.nv == max_side)) n_capped++;
             for (; c < min(next, c_end); ++c) {
-                uint j = (c - first) * POINTS_LOCAL + get_local_id(0);
-                if (j >= total_here) continue;   // the patch's last chunk is partly empty
-                uint iu = j % g.nu, iv = j / g.nu;
-                float3 world, n_obj, tu, tv;
-                float us = grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
-                float vs = grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
-                int r = centre ? point_eval_partials(func, P, I, us, vs, &world, &n_obj, &tu, &tv)
-                               : point_eval(func, P, I, us, vs, &world, &n_obj);
-                n_samples++;
+                uint unit = (c - first) * POINTS_LOCAL + get_local_id(0);   // the patch's run
+                if (unit >= runs.na * runs.runs) continue;   // the patch's last chunk is partly empty
+                uint ia = unit % runs.na, ib0 = unit / runs.na * runs.len, ib1 = min(ib0 + runs.len, runs.nb);
+                float C[PL_SPLIT_FLOATS];
+                if (runs.split == PL_SPLIT_U) pl_surface_axis(func, grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, ia), P, C);
+                if (runs.split == PL_SPLIT_V) pl_surface_axis(func, grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, ia), P, C);
+                for (uint ib = ib0; ib < ib1; ++ib) {
+                    uint iu = runs.split == PL_SPLIT_V ? ib : ia, iv = runs.split == PL_SPLIT_V ? ia : ib;
+                    uint j = iv * g.nu + iu;
+                    float3 world, n_obj, tu, tv;
+                    float us = grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
+                    float vs = grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
+                    int r = centre ? point_eval_partials(func, P, I, runs.split, C, us, vs, &world, &n_obj, &tu, &tv)
+                                   : point_eval(func, P, I, runs.split, C, us, vs, &world, &n_obj);
+                    n_samples++;
 #ifdef PL_RECORD
-                rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;
+                    rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;
 #endif
-                if (r == SAMPLE_NAN) { n_nan++; continue; }
-                // one evaluation, shaded and written into every view that sees the patch and
-                // whose frustum holds the sample
-                for (ulong left = seen; left != 0ul; left &= left - 1ul) {
-                    uint view = 63u - (uint)clz(left & (~left + 1ul));   // the lowest view left
-                    __global const float* cv = cam + view * CAM_FLOATS;
-                    Placed p;
-                    if (point_place(world, cv, &p) != SAMPLE_DRAWN) continue;
-                    uint pix = view * layer_pixels + (uint)p.y * W + (uint)p.x;
-                    // the pixels it covers: its own, or (centre) those whose centres its cell holds
-                    uint cover = COVER_OWN;
-                    if (centre) {
-                        float2 hu = cell_half(us, g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
-                        float2 hv = cell_half(vs, g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
-                        cover = cover_cells(p, screen_dir(cv, p, tu), screen_dir(cv, p, tv), (float2)(hu.x, hv.x),
-                                            (float2)(hu.y, hv.y), W, H);
-                    }
-                    bool shaded = false;
-                    ulong key, aux;
-#ifdef PL_RECORD   // the hook records every sample's own pixel and key
-                    point_keys(p, n_obj, cv, mat, light, object_id, &key, &aux);
-                    shaded = true;
-                    if (view == 0u) { rec_pix[rec_offset[pid] + j] = pix; rec_key[rec_offset[pid] + j] = key; }
-#endif
-                    for (uint left = cover == COVER_OWN ? 1u : cover; left != 0u; left &= left - 1u) {
-                        uint q = pix;
-                        if (cover != COVER_OWN) {
-                            int k = 31 - (int)clz(left & (~left + 1u));   // the lowest bit left
-                            int side = 2 * COVER_REACH + 1;
-                            int dx = k % side - COVER_REACH, dy = k / side - COVER_REACH;
-                            q = (uint)((int)pix + dy * (int)W + dx);
+                    if (r == SAMPLE_NAN) { n_nan++; continue; }
+                    // one evaluation, shaded and written into every view that sees the patch and
+                    // whose frustum holds the sample
+                    for (ulong left = seen; left != 0ul; left &= left - 1ul) {
+                        uint view = 63u - (uint)clz(left & (~left + 1ul));   // the lowest view left
+                        __global const float* cv = cam + view * CAM_FLOATS;
+                        Placed p;
+                        if (point_place(world, cv, &p) != SAMPLE_DRAWN) continue;
+                        uint pix = view * layer_pixels + (uint)p.y * W + (uint)p.x;
+                        // the pixels it covers: its own, or (centre) those whose centres its cell holds
+                        uint cover = COVER_OWN;
+                        if (centre) {
+                            float2 hu = cell_half(us, g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
+                            float2 hv = cell_half(vs, g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
+                            cover = cover_cells(p, screen_dir(cv, p, tu), screen_dir(cv, p, tv), (float2)(hu.x, hv.x),
+                                                (float2)(hu.y, hv.y), W, H);
                         }
-#ifndef PL_RECORD
-                        if (key_hidden(color_buf, q, p.depth)) continue;
+                        bool shaded = false;
+                        ulong key, aux;
+#ifdef PL_RECORD   // the hook records every sample's own pixel and key
+                        point_keys(p, n_obj, cv, mat, light, object_id, &key, &aux);
+                        shaded = true;
+                        if (view == 0u) { rec_pix[rec_offset[pid] + j] = pix; rec_key[rec_offset[pid] + j] = key; }
 #endif
-                        if (!shaded) { point_keys(p, n_obj, cv, mat, light, object_id, &key, &aux); shaded = true; }
-                        n_atomics += write_point(color_buf, aux_buf, q, key, aux);
+                        for (uint left = cover == COVER_OWN ? 1u : cover; left != 0u; left &= left - 1u) {
+                            uint q = pix;
+                            if (cover != COVER_OWN) {
+                                int k = 31 - (int)clz(left & (~left + 1u));   // the lowest bit left
+                                int side = 2 * COVER_REACH + 1;
+                                int dx = k % side - COVER_REACH, dy = k / side - COVER_REACH;
+                                q = (uint)((int)pix + dy * (int)W + dx);
+                            }
+#ifndef PL_RECORD
+                            if (key_hidden(color_buf, q, p.depth)) continue;
+#endif
+                            if (!shaded) { point_keys(p, n_obj, cv, mat, light, object_id, &key, &aux); shaded = true; }
+                            n_atomics += write_point(color_buf, aux_buf, q, key, aux);
+                        }
                     }
                 }
             }

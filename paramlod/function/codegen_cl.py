@@ -323,19 +323,78 @@ def function_body(fn: ParametricFunction, exprs, printer: CLPrinter = _printer,
     Backend-neutral apart from the printer and ``sincos`` (OpenCL only): the GLSL printer reuses it
     with ``fn.program("position")`` or ``fn.program("surface")``.
     """
-    def decl(e):
-        return printer.bool_decl if isinstance(e, sp.logic.boolalg.Boolean) else printer.local_decl
-
     low = lower(exprs, bindings, optimize=optimize, sincos=sincos)
+    return step_lines(fn, low.steps, printer), [_print_checked(printer, e, fn) for e in low.outputs]
+
+
+def step_lines(fn: ParametricFunction, steps, printer: CLPrinter = _printer) -> list[str]:
+    """One declaration line per step (two for a SinCos)."""
     lines = []
-    for step in low.steps:
+    for step in steps:
         if isinstance(step, SinCos):
             lines.append(f"    float {step.c};")
             lines.append(f"    {printer.local_decl} {step.s} = sincos({_print_checked(printer, step.arg, fn)}, &{step.c});")
         else:
             sym, e = step
-            lines.append(f"    {decl(e)} {printer.doprint(sym)} = {_print_checked(printer, e, fn)};")
-    return lines, [_print_checked(printer, e, fn) for e in low.outputs]
+            decl = printer.bool_decl if isinstance(e, sp.logic.boolalg.Boolean) else printer.local_decl
+            lines.append(f"    {decl} {printer.doprint(sym)} = {_print_checked(printer, e, fn)};")
+    return lines
+
+
+# --- the surface split along one parameter ----------------------------------------------------------
+# A point renderer samples a patch on a grid, so the steps that read only one parameter (the
+# centreline of a fibre or a yarn: 591 of the fibre's 595 operations; the Legendre terms of an SH
+# glyph: 1083 of 1519) are the same along a grid line. ``split_surface`` separates them, so that a
+# work-item computes them once per grid line (pl_surface_axis) and then the rest per sample
+# (pl_surface_rest) along a run of that line. Both parts are the steps of pl_surf_i, in its order, so
+# the values are those of pl_surface.
+SPLIT_MIN_OPS = 16   # below this many operations on the axis alone, a split saves less than it costs
+SPLIT_NONE, SPLIT_U, SPLIT_V = 0, 1, 2   # pl_split(func): no split, the axis steps read u / read v
+
+
+class SplitSurface:
+    """``axis`` (SPLIT_U / SPLIT_V): the steps of pl_surf_i that read only that parameter
+    (``axis_steps``), the ones of them the others read (``carried``, in order), and the others
+    (``rest_steps``) with ``outputs``; ``ops``: sympy's operation count of the axis steps."""
+
+    def __init__(self, axis, axis_steps, carried, rest_steps, outputs, ops):
+        self.axis, self.axis_steps, self.carried = axis, axis_steps, carried
+        self.rest_steps, self.outputs, self.ops = rest_steps, outputs, ops
+
+
+def _step_symbols(step):
+    return (step.s, step.c) if isinstance(step, SinCos) else (step[0],)
+
+
+def _step_expr(step):
+    return step.arg if isinstance(step, SinCos) else step[1]
+
+
+def split_surface(fn: ParametricFunction, low: Lowered) -> SplitSurface | None:
+    """The split of the lowered surface steps along the parameter whose steps alone cost more, or
+    None when those cost fewer than SPLIT_MIN_OPS operations."""
+    reads = {}   # step symbol -> the parameters (u, v) it reads, directly or through other steps
+    for step in low.steps:
+        r = set()
+        for s in _step_expr(step).free_symbols:
+            r |= {s} if s in (fn.u, fn.v) else reads.get(s, set())
+        for s in _step_symbols(step):
+            reads[s] = r
+    best = None
+    for axis, param in ((SPLIT_U, fn.u), (SPLIT_V, fn.v)):
+        ops = sum(sp.count_ops(_step_expr(st)) + isinstance(st, SinCos)
+                  for st in low.steps if reads[_step_symbols(st)[0]] == {param})
+        if ops >= SPLIT_MIN_OPS and (best is None or ops > best[2]):
+            best = (axis, param, ops)
+    if best is None:
+        return None
+    axis, param, ops = best
+    # steps of the function's parameters alone (reading neither u nor v) go into both parts
+    axis_steps = [st for st in low.steps if reads[_step_symbols(st)[0]] <= {param}]
+    rest = [st for st in low.steps if reads[_step_symbols(st)[0]] != {param}]
+    read = set().union(*(_step_expr(st).free_symbols for st in rest), *(e.free_symbols for e in low.outputs))
+    carried = [s for st in axis_steps if reads[_step_symbols(st)[0]] for s in _step_symbols(st) if s in read]
+    return SplitSurface(axis, axis_steps, carried, rest, list(low.outputs), ops)
 
 
 def check_printable(fn: ParametricFunction) -> None:
@@ -411,13 +470,56 @@ def _cl_function_source(fn: ParametricFunction, index: int, optimize: bool = Tru
     pos = (f"inline float3 pl_pos_{index}(float u, float v, __global const float* P) {{\n"
            + "\n".join(loads + lines) + f"\n    return (float3)({x}, {y}, {z});\n}}\n")
     bindings, outputs = program("surface")
-    lines, r = function_body(fn, outputs, bindings=bindings, optimize=optimize, sincos=optimize)
-    surf = (f"inline void pl_surf_{index}(float u, float v, __global const float* P,"
-            f" float3* pos, float3* du, float3* dv) {{\n" + "\n".join(loads + lines)
+    low = lower(outputs, bindings, optimize=optimize, sincos=optimize)
+    surf = _surface_source(fn, f"pl_surf_{index}(float u, float v, __global const float* P,",
+                           loads + step_lines(fn, low.steps), low.outputs)
+    if not optimize:
+        return head + pos + surf
+    split = _splits[fn] = split_surface(fn, low)
+    return head + pos + surf + (_split_source(fn, index, loads, split) if split else "")
+
+
+# the split of each function's generated surface code (None: none), filled with its source
+_splits: "weakref.WeakKeyDictionary[ParametricFunction, SplitSurface | None]" = weakref.WeakKeyDictionary()
+
+
+def surface_split(fn: ParametricFunction) -> SplitSurface | None:
+    """The split the generated code of ``fn`` has (None: pl_surface_rest calls pl_surf_i)."""
+    if fn.is_snippet:
+        return None
+    if fn not in _splits:
+        cl_function_source(fn, 0)
+    return _splits[fn]
+
+
+def _surface_source(fn, head: str, lines, outputs) -> str:
+    r = [_print_checked(_printer, e, fn) for e in outputs]
+    return (f"inline void {head} float3* pos, float3* du, float3* dv) {{\n" + "\n".join(lines)
             + f"\n    *pos = (float3)({r[0]}, {r[1]}, {r[2]});"
             + f"\n    *du = (float3)({r[3]}, {r[4]}, {r[5]});"
             + f"\n    *dv = (float3)({r[6]}, {r[7]}, {r[8]});\n}}\n")
-    return head + pos + surf
+
+
+def _split_source(fn: ParametricFunction, index: int, loads, split: SplitSurface) -> str:
+    """pl_axis_i (the axis steps; the carried values stored in C) and pl_rest_i (the carried values
+    loaded from C, the other steps, the outputs)."""
+    name = _printer.doprint(fn.u if split.axis == SPLIT_U else fn.v)
+    conditions = {st[0] for st in split.axis_steps
+                  if not isinstance(st, SinCos) and isinstance(st[1], sp.logic.boolalg.Boolean)}
+    store, load = [], []
+    for k, sym in enumerate(split.carried):
+        name_k = _printer.doprint(sym)
+        if sym in conditions:   # a condition travels as 0 or 1
+            store.append(f"    C[{k}] = {name_k} ? 1.0f : 0.0f;")
+            load.append(f"    {_printer.bool_decl} {name_k} = C[{k}] != 0.0f;")
+        else:
+            store.append(f"    C[{k}] = {name_k};")
+            load.append(f"    const float {name_k} = C[{k}];")
+    axis = (f"inline void pl_axis_{index}(float {name}, __global const float* P, float* C) {{\n"
+            + "\n".join(loads + step_lines(fn, split.axis_steps) + store) + "\n}\n")
+    rest = _surface_source(fn, f"pl_rest_{index}(float u, float v, __global const float* P, const float* C,",
+                           loads + load + step_lines(fn, split.rest_steps), split.outputs)
+    return axis + rest
 
 
 def cl_dispatch_source(functions: list[ParametricFunction], optimize: bool = True) -> str:
@@ -437,4 +539,24 @@ def cl_dispatch_source(functions: list[ParametricFunction], optimize: bool = Tru
         " float3* pos, float3* du, float3* dv) {\n"
         f"    switch (func) {{\n{cases_s}    }}\n"
         "    *pos = *du = *dv = (float3)(NAN, NAN, NAN);\n}\n")
+    parts.append(_split_dispatch(functions, optimize))
     return "\n".join(parts)
+
+
+def _split_dispatch(functions: list[ParametricFunction], optimize: bool) -> str:
+    """pl_split(func) (SPLIT_NONE / SPLIT_U / SPLIT_V), pl_surface_axis and pl_surface_rest, and
+    PL_SPLIT_FLOATS (the carried values of the largest split: the size of C)."""
+    splits = [surface_split(f) if optimize else None for f in functions]
+    floats = max([1] + [len(s.carried) for s in splits if s])
+    kinds = "".join(f"        case {i}: return {s.axis}u;\n" for i, s in enumerate(splits) if s)
+    axis = "".join(f"        case {i}: pl_axis_{i}(a, P, C); return;\n" for i, s in enumerate(splits) if s)
+    rest = "".join(f"        case {i}: pl_rest_{i}(u, v, P, C, pos, du, dv); return;\n" if s else
+                   f"        case {i}: pl_surf_{i}(u, v, P, pos, du, dv); return;\n" for i, s in enumerate(splits))
+    return (f"#define PL_SPLIT_U {SPLIT_U}u\n#define PL_SPLIT_V {SPLIT_V}u\n#define PL_SPLIT_FLOATS {floats}\n"
+            f"inline uint pl_split(uint func) {{\n    switch (func) {{\n{kinds}    }}\n    return 0u;\n}}\n"
+            "inline void pl_surface_axis(uint func, float a, __global const float* P, float* C) {\n"
+            f"    switch (func) {{\n{axis}    }}\n}}\n"
+            "inline void pl_surface_rest(uint func, float u, float v, __global const float* P, const float* C,"
+            " float3* pos, float3* du, float3* dv) {\n"
+            f"    switch (func) {{\n{rest}    }}\n"
+            "    *pos = *du = *dv = (float3)(NAN, NAN, NAN);\n}\n")

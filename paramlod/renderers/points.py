@@ -20,6 +20,9 @@ from paramlod.device.programs import launch
 from paramlod.function.programs import POLY_TRIG, build
 
 LOCAL_SIZE = 64
+# samples a work-item takes down a grid line of a split function (points.cl patch_runs): the steps
+# of the split's axis are evaluated once per run
+RUN_GPU, RUN_CPU = 1, 16
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
 # occlusion = "auto": culling is used while it saves at least this share of a frame's samples
 # (measured on the H200, docs/points.md: culling that removed 6 % of the samples cost 7 % of the
@@ -74,6 +77,7 @@ class DirectPointRenderer:
             defines["PL_GROUP_COUNTERS"] = 1
         else:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
             defines[POLY_TRIG] = 1
+        defines["PL_RUN"] = RUN_GPU if cl_device().is_gpu else RUN_CPU
         # occlusion.cl shares the program: the function code is compiled once
         self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions, defines)
         # own kernel objects per list drawn in a frame (all patches, the two occlusion phases, the
@@ -132,7 +136,7 @@ class DirectPointRenderer:
             k = self._launches[(phase, tier)] = _Launch(self.program)
         bound = (count_buf, count_at, capacity, tier, args)
         if bound != k.bound:
-            k.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), *sampling,
+            k.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), inst[1], *sampling,
                                 np.uint32(settings.max_side), ALL_TIERS if tier is None else np.uint32(tier),
                                 self._order, self.counters)
             k.kernel.set_args(*args)

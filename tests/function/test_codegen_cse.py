@@ -11,7 +11,8 @@ import sympy as sp
 from paramlod.app.bench.functions import (_fma_kernel, count_flops, fma_ceiling_reference, function_flops,
                                           peak_from_info)
 from paramlod.device.context import cl_device
-from paramlod.function.codegen_cl import SinCos, cl_function_source, function_body, lower
+from paramlod.function.codegen_cl import (SPLIT_MIN_OPS, SPLIT_U, SPLIT_V, SinCos, cl_function_source,
+                                          function_body, lower, surface_split)
 from paramlod.function.codegen_glsl import glsl_function_source
 from paramlod.function.plugins import evaluate_cl
 from paramlod.function.registry import builtin_functions
@@ -46,6 +47,38 @@ def test_cse_code_equals_the_numpy_twin_for_every_builtin_and_sh_order():
             # partials: a few ulps of float32 cancellation near poles/kinks; nearly all samples tight
             close = np.abs(a - b).max(axis=-1) <= 1e-3 * (np.abs(b).max() + 1e-6)
             assert close.mean() > 0.99, (name, close.mean())
+
+
+def test_the_surface_split_gives_pl_surface_bit_for_bit():
+    # a point renderer evaluates split functions in two parts (the axis steps once per grid line):
+    # the samples must be the ones pl_surface gives, to the bit
+    funcs = list(FUNCS.values())
+    split = 0
+    for name, fn in FUNCS.items():
+        u, v = _uv(fn, seed=3)
+        pos, du, dv, _, (spos, sdu, sdv) = evaluate_cl(fn, u, v, functions=funcs, split=True)
+        for a, b in ((spos, pos), (sdu, du), (sdv, dv)):
+            np.testing.assert_array_equal(a.view(np.int64), b.view(np.int64), err_msg=name)
+        split += surface_split(fn) is not None
+    assert split >= 8
+
+
+@pytest.mark.parametrize("name, axis, share", [("fiber", SPLIT_U, 0.9), ("yarn", SPLIT_U, 0.75),
+                                                ("sh order 12", SPLIT_U, 0.65), ("seashell1", SPLIT_V, 0.2),
+                                                ("torus", None, 0), ("sphere", None, 0)])
+def test_split_axis_and_what_it_saves(name, axis, share):
+    fn = FUNCS[name]
+    split = surface_split(fn)
+    src = cl_function_source(fn, 0)
+    if axis is None:   # too little on either axis alone: no split, pl_surface_rest calls pl_surf_i
+        assert split is None and "pl_rest_0" not in src
+        return
+    assert split.axis == axis and split.ops >= SPLIT_MIN_OPS
+    body = {b.split("(")[0]: b for b in re.split(r"\ninline \w+ ", "\n" + src)[1:]}
+    whole, rest = count_flops(body["pl_surf_0"])["flops"], count_flops(body["pl_rest_0"])["flops"]
+    # a run of samples down a grid line pays the axis steps once: the rest is what each sample costs
+    assert rest <= (1 - share) * whole, (name, rest, whole)
+    assert len(split.carried) <= 64
 
 
 def test_the_shared_code_costs_less_than_the_unshared():

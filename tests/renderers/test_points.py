@@ -9,6 +9,9 @@ import sympy as sp
 import paramlod as pl
 from paramlod.core.layouts import cl_prelude
 from paramlod.device.context import cl_device
+from paramlod.function.codegen_cl import SPLIT_NONE, SPLIT_U, SPLIT_V, surface_split
+from paramlod.scene.framing import framing_camera
+from paramlod.renderers import points as points_module
 from paramlod.renderers.points import DirectPointRenderer, grid_counts
 from paramlod.renderers.targets import KeyBuffer
 
@@ -28,6 +31,37 @@ def test_key_buffer_equals_minimum_at_over_the_same_samples():
     expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
     np.minimum.at(expect, pix[kept], key[kept])
     np.testing.assert_array_equal(color, expect)
+
+
+def test_runs_of_split_functions_visit_every_sample_once(monkeypatch):
+    # the fibre splits along u, a seashell along v, the sphere not at all (codegen_cl.split_surface):
+    # the work-items' runs down grid lines (points.cl patch_runs) take each sample once, and give
+    # the keys of runs of one sample evaluated whole (PL_RUN 1, as on GPUs) bit for bit
+    scene = pl.Scene()
+    scene.add("fiber", material=pl.Material(color=(0.8, 0.5, 0.3)))
+    scene.add("seashell1", transform=pl.translate(9.0, 0.0, 0.0) @ pl.scale(0.6))
+    scene.add("sphere", transform=pl.translate(-4.0, 0.0, 0.0) @ pl.scale(2.0))
+    assert [split_kind(f) for f in scene.functions()] == [SPLIT_U, SPLIT_V, SPLIT_NONE]
+    cam = framing_camera(scene, size=(120, 72))
+    colors = []
+    for run in (1, 3, 16):
+        monkeypatch.setattr(points_module, "RUN_CPU", run)
+        stats, color, pix, key, total = record_direct_points(pl.PointSettings(coverage="pixel"), cam.size, scene, cam)
+        assert stats["samples"] == total
+        assert not (pix == NOT_VISITED).any()
+        kept = pix != 0xFFFFFFFF
+        assert kept.sum() > 1000
+        expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
+        np.minimum.at(expect, pix[kept], key[kept])
+        np.testing.assert_array_equal(color, expect)
+        colors.append(color)
+    for color in colors[1:]:
+        np.testing.assert_array_equal(color, colors[0])
+
+
+def split_kind(fn):
+    split = surface_split(fn)
+    return SPLIT_NONE if split is None else split.axis
 
 
 def test_early_depth_before_shading_keeps_every_key():

@@ -27,9 +27,10 @@ import pyopencl.array as cla
 
 from paramlod.device import programs
 from paramlod.device.context import cl_device
-from paramlod.function.codegen_cl import cl_dispatch_source, cl_function_source
+from paramlod.function.codegen_cl import SPLIT_V, cl_dispatch_source, cl_function_source, surface_split
 from paramlod.function.registry import all_functions
 from paramlod.functions.sh_glyph import make_sh_glyph
+from paramlod.renderers.points import RUN_CPU, RUN_GPU
 
 SH_ORDERS = (2, 4, 6, 8, 10, 12)
 NORMAL_FLOPS = 9          # cross(du, dv): 6 mul + 3 sub
@@ -198,6 +199,25 @@ def _time(k, q, nu, nv, fn, params, out_buf, repeats) -> float:
     return nu * nv / best
 
 
+def _time_split(k, q, nu, nv, fn, params, out_buf, repeats, run: int) -> float:
+    """Samples/s of eval_split_throughput over an nu x nv grid in runs of ``run`` down its lines."""
+    split = surface_split(fn)
+    (u0, u1), (v0, v1) = fn.u_range, fn.v_range
+    line = (u0, (u1 - u0) / nu, v0, (v1 - v0) / nv, nu, nv)
+    if split is not None and split.axis == SPLIT_V:   # lines of constant v, runs along u
+        line = (v0, (v1 - v0) / nv, u0, (u1 - u0) / nu, nv, nu)
+    a0, da, b0, db, na, nb = line
+    best = None
+    for r in range(repeats + 1):   # the first run is a warm-up
+        evt = k(q, (na, nb // run), None, np.uint32(0), np.float32(a0), np.float32(da), np.float32(b0),
+                np.float32(db), np.uint32(na), np.uint32(run), params.data, out_buf.data)
+        evt.wait()
+        if r:
+            t = (evt.profile.end - evt.profile.start) * 1e-9
+            best = t if best is None else min(best, t)
+    return na * (nb // run) * run / best
+
+
 def builtin_set(orders=SH_ORDERS) -> dict:
     fns = dict(all_functions())
     fns.update({f"sh_glyph order {o}": make_sh_glyph(o) for o in orders})
@@ -228,6 +248,13 @@ def function_throughput(nu=2048, nv=1024, before: bool = False, names=None, repe
             ks = programs.kernel("eval_surface_throughput", ["common/eval.cl"], generated=src, describe=fn.name)
             sp_pos = _time(kp, q, nu, nv, fn, params, out_buf, repeats)
             sp_surf = _time(ks, q, nu, nv, fn, params, out_buf, repeats)
+            if opt:   # the surface split in runs, as the point renderer on this device takes them
+                kx = programs.kernel("eval_split_throughput", ["common/eval.cl"], generated=src, describe=fn.name)
+                run = RUN_GPU if cl_device().is_gpu else RUN_CPU
+                row.update({"split_axis": "none" if surface_split(fn) is None else "uv"[surface_split(fn).axis - 1],
+                            "split_run": run,
+                            "split_samples_per_s": _time_split(kx, q, nu, nv, fn, params, out_buf, repeats, run),
+                            "split_samples_per_s_run16": _time_split(kx, q, nu, nv, fn, params, out_buf, repeats, 16)})
             if fn.is_snippet:
                 fp = fs = None   # the user's own C: not counted
             else:
@@ -263,6 +290,17 @@ def format_function_throughput(rows: list[dict]) -> list[str]:
                      f"{f(r['peak_fraction'] and 100 * r['peak_fraction'], '.1f')} | "
                      f"{r['surface_samples_per_s'] / 1e6:,.0f} M | {f(r['surface_flops_per_sample'], 'd')} | "
                      f"{f(r['surface_peak_fraction'] and 100 * r['surface_peak_fraction'], '.1f')} |")
+    if "split_samples_per_s" in rows[0]:
+        lines += ["", "The surface split (codegen_cl.split_surface): a work-item evaluates the steps of one "
+                  "parameter once per grid line and the rest per sample down a run of that line "
+                  f"(runs of {rows[0]['split_run']}, as the point renderer takes them on this device, and of 16):", "",
+                  "| function | split along | surface samples/s | split, runs of " f"{rows[0]['split_run']}" " | × | runs of 16 | × |",
+                  "|---|---|---:|---:|---:|---:|---:|"]
+        for r in rows:
+            base = r["surface_samples_per_s"]
+            lines.append(f"| {r['function']} | {r['split_axis']} | {base / 1e6:,.0f} M | "
+                         f"{r['split_samples_per_s'] / 1e6:,.0f} M | {r['split_samples_per_s'] / base:.2f} | "
+                         f"{r['split_samples_per_s_run16'] / 1e6:,.0f} M | {r['split_samples_per_s_run16'] / base:.2f} |")
     if "samples_per_s_before" in rows[0]:
         lines += ["", "Before/after the shared CSE (samples/s, FLOP/sample):", "",
                   "| function | positions before | after | FLOP before | after | surface before | after | "
