@@ -1,6 +1,6 @@
-// Inline sin, cos and sincos for the generated function code of the direct point sampler and the
-// grid tessellator on CPU devices (PL_POLY_TRIG, set by paramlod/renderers/points.py and
-// tess_grid.py where cl_device() is not a GPU). PoCL's CPU builtins are calls that are never
+// Inline sin, cos and sincos for the generated function code of the direct point sampler, the
+// grid tessellator and the LOD stage on CPU devices (PL_POLY_TRIG, set by
+// paramlod/renderers/points.py, tess_grid.py and paramlod/lod/stage.py where cl_device() is not a GPU). PoCL's CPU builtins are calls that are never
 // inlined, so a kernel that calls them runs one work-item at a time; written out here, the
 // arithmetic inlines and vectorizes. Measured on PoCL
 // 3.0 (2-core AMD EPYC, 640 x 640 points frames): the order-8 glyph field's render 354 -> 261 ms,

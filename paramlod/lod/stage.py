@@ -22,7 +22,7 @@ from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, SceneError
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, initial_patches, render_tiers  # noqa: F401  (re-exported)
 from paramlod.device.programs import launch
-from paramlod.function.programs import build
+from paramlod.function.programs import POLY_TRIG, build
 
 
 @dataclass
@@ -266,8 +266,10 @@ class LodStage:
         layout = lod_layout(n_views, self._max_group)
         if layout not in self._step_kernels:
             group, slots = layout
-            prog = build(["lod/lod.cl"], self._functions,
-                         defines={"LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots})
+            defines = {"LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots}
+            if not cl_device().is_gpu:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
+                defines[POLY_TRIG] = 1
+            prog = build(["lod/lod.cl"], self._functions, defines=defines)
             self._step_kernels[layout] = [cl.Kernel(prog, "lod_step") for _ in range(15)]
         return layout, self._step_kernels[layout]
 
