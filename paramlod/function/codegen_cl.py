@@ -7,7 +7,8 @@ For each function index i the generated source defines
     void   pl_surf_i(float u, float v, __global const float* P, float3* pos, float3* du, float3* dv)
 
 and two dispatchers ``pl_position(func, ...)`` / ``pl_surface(func, ...)`` that switch on the index,
-which the kernels in ``kernels/`` call.
+which the kernels in ``kernels/`` call; and the surface split (``split_surface``): ``pl_axis_i`` /
+``pl_rest_i`` with the dispatchers ``pl_split``, ``pl_surface_axis`` and ``pl_surface_rest``.
 
 Snippet functions (``@parametric(..., snippet=...)``) are emitted as ``pl_snip_i`` with the
 dialect macros of ``kernels/dialect.cl`` in front; their partials are central differences.
