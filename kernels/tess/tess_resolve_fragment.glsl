@@ -54,6 +54,25 @@ uniform sampler2D u_color;
 
 #include "common/targets.glsl"
 
+// The 8-bit sRGB image over u_background that Frame.rgb8 returns (RGBA8UI, alpha 255), so that a
+// frame asked only for its image reads 4 bytes a pixel. Bit for bit the host's
+// linear_to_srgb8(rgb * a + background * (1 - a)) of out_color: the composite in float32 as
+// numpy computes it (precise: no fused multiply-add), and the code is the count of the encoder's
+// thresholds at or below the value (paramlod.core.color.linear_to_srgb8_thresholds): the
+// shader's own pow, whose rounding differs from numpy's, only guesses it to within one code.
+layout(location = 4) out uvec4 out_image;
+uniform vec3 u_background;
+uniform float u_srgb8_thresholds[255];   // [k - 1]: the least float encoded as k or more
+
+uint srgb8_code(float x) {
+    x = clamp(x, 0.0, 1.0);
+    float s = x <= 0.0031308 ? 12.92 * x : 1.055 * pow(x, 1.0 / 2.4) - 0.055;
+    uint k = uint(clamp(s * 255.0 + 0.5, 0.0, 255.0));
+    while (k > 0u && x < u_srgb8_thresholds[k - 1u]) --k;     // the guess is at most one code off:
+    while (k < 255u && x >= u_srgb8_thresholds[k]) ++k;       // at most one step, exact whatever it was
+    return k;
+}
+
 void main() {
     ivec2 p = ivec2(gl_FragCoord.xy);
     int ns = PL_DEVICE_SAMPLES;
@@ -78,9 +97,13 @@ void main() {
         }
     }
     c /= float(PL_SS * PL_SS);
-    out_color = c.a > 0.0 ? vec4(c.rgb / c.a, c.a) : vec4(0.0);
+    precise vec4 straight = c.a > 0.0 ? vec4(c.rgb / c.a, c.a) : vec4(0.0);
+    out_color = straight;
     out_depth = best;
     float ln = length(n);
     out_normal = vec4(ln > 0.0 ? n / ln : vec3(0.0), 0.0);
     out_object = id;
+    precise vec3 over = straight.rgb * straight.a + u_background * (1.0 - straight.a);
+    out_image = uvec4(srgb8_code(over.r), srgb8_code(over.g), srgb8_code(over.b), 255u);
+    if (!isinf(best)) atomicAdd(pl_pixels_written, 1u);
 }

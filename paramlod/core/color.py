@@ -5,8 +5,9 @@ The device reads everything of sRGB from here: ``cl_tables()`` (part of the Open
 the resolve in kernels/points/resolve.cl looks codes up in, and ``srgb8_thresholds()`` as the
 ``SRGB8_THRESHOLDS`` table that ``srgb8()`` in kernels/common/keys.cl searches; ``srgb_tables()``
 are uploaded for the integer encoder ``encode_srgb8`` in kernels/points/subsamples.cl
-(paramlod.renderers.targets). The tessellation shaders write linear colour; the host encodes it
-(``linear_to_srgb8``). The numpy twins of the kernels call the functions here.
+(paramlod.renderers.targets). The tessellation shaders write linear colour; the GL resolve encodes
+the image with ``linear_to_srgb8_thresholds()``, the host's ``linear_to_srgb8`` bit for bit. The
+numpy twins of the kernels call the functions here.
 
 Two encoders share the curve and differ only in the precision of the arithmetic, which matters:
 on float32 input the two disagree by one code on 203 of the 1,065,353,217 float32 values in
@@ -19,8 +20,11 @@ bits it has always produced:
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
+_ONE_BITS = 0x3F800000   # 1.0f
 LIN_BITS = 24   # fixed-point scale of linear colour in the resolve: 9 x 2^24 fits in 32 bits
 
 # The curve (IEC 61966-2-1). Python floats, so that float32 arrays stay float32 in the arithmetic.
@@ -44,6 +48,21 @@ def linear_to_srgb8(c: np.ndarray) -> np.ndarray:
     c = np.clip(c, 0.0, 1.0)
     s = np.where(c <= SRGB_ENCODE_CUTOFF, SRGB_SLOPE * c, SRGB_SCALE * np.power(c, 1 / SRGB_GAMMA) - SRGB_OFFSET)
     return (s * 255.0 + 0.5).astype(np.uint8)
+
+
+@functools.lru_cache(maxsize=None)
+def linear_to_srgb8_thresholds() -> np.ndarray:
+    """float32 [255]: element k - 1 is the smallest float32 x with ``linear_to_srgb8(x)`` >= k, so
+    the count of elements <= x is ``linear_to_srgb8(x)`` of a float32 x, bit for bit (checked for
+    every float32 in [0, 1]: the encoder is monotone there; below 0 both give 0, above 1 both 255).
+    The tess resolve's image encodes with them (kernels/tess/tess_resolve_fragment.glsl)."""
+    codes = np.arange(1, 256)
+    lo, hi = np.zeros(255, np.int64), np.full(255, _ONE_BITS, np.int64)   # bit patterns of 0.0 and 1.0
+    while np.any(lo < hi):   # bisection over the bit patterns, which order non-negative floats
+        mid = (lo + hi) // 2
+        up = linear_to_srgb8(mid.astype(np.uint32).view(np.float32)) >= codes
+        lo, hi = np.where(up, lo, mid + 1), np.where(up, mid, hi)
+    return hi.astype(np.uint32).view(np.float32)
 
 
 def linear_to_srgb8_f64(c: np.ndarray) -> np.ndarray:

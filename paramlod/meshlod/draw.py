@@ -290,7 +290,7 @@ class MeshDraw:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)   # two-sided
 
-    def _stats(self, size, aa, color_by, cmd, triangles, depth, device_samples, ms) -> dict:
+    def _stats(self, size, aa, color_by, cmd, triangles, written, device_samples, ms) -> dict:
         req, eff, notes = aa
         if device_samples != eff.msaa:
             notes = notes + [f"the device allocated {device_samples} samples per pixel for a {eff.msaa}-sample "
@@ -314,7 +314,7 @@ class MeshDraw:
             "triangles": triangles,
             "draw_calls": 1 if n else 0,
             "draw_commands": n,
-            "pixels_written": int(np.count_nonzero(np.isfinite(depth))),
+            "pixels_written": written,
             "warnings": list(notes),
             "ms": ms,
         }
@@ -351,15 +351,15 @@ class MeshDraw:
             triangles = int(query.primitives)
         ctx.finish()
         t3 = time.perf_counter()
-        device_samples = tg.resolve()
+        device_samples = tg.resolve(background)
         t4 = time.perf_counter()
-        color, depth, normal, ids = tg.read()
-        t5 = time.perf_counter()
+        frame = tg.frame()   # read back lazily: the image alone when only it is asked for
         ms = {"setup": (t1 - t0) * 1e3, "upload": (t2 - t1) * 1e3, "render": (t3 - t2) * 1e3,
-              "draw": (t3 - t2) * 1e3, "resolve": (t4 - t3) * 1e3, "readback": (t5 - t4) * 1e3,
-              "frame": (t4 - t0) * 1e3, "total": (t5 - t0) * 1e3}
-        stats = FrameStats(self._stats((w, h), aa_, color_by, cmd, triangles, depth, device_samples, ms))
-        return Frame(color=color, depth=depth, normal=normal, object_id=ids, stats=stats, background=background)
+              "draw": (t3 - t2) * 1e3, "resolve": (t4 - t3) * 1e3, "readback": 0.0,
+              "frame": (t4 - t0) * 1e3, "total": (t4 - t0) * 1e3}
+        frame.stats = FrameStats(self._stats((w, h), aa_, color_by, cmd, triangles, tg.pixels_written,
+                                             device_samples, ms))
+        return frame
 
     def draw_views(self, selection: np.ndarray, masks: np.ndarray, views: Views, aa: str | None = None,
                    color_by: int = 0, light=None, background=(0.0, 0.0, 0.0), weights=None) -> list[Frame]:
@@ -412,7 +412,7 @@ class MeshDraw:
         frames = []
         for v in range(n_views):
             t4 = time.perf_counter()
-            tg.resolve(v)
+            tg.resolve(v, background)
             device_samples = tg.device_samples()   # waits for the resolve
             t5 = time.perf_counter()
             color, depth, normal, ids = tg.read()
@@ -420,7 +420,8 @@ class MeshDraw:
             ms = {"setup": (t1 - t0) * 1e3, "upload": (t2 - t1) * 1e3, "render": (t3 - t2) * 1e3,
                   "draw": (t3 - t2) * 1e3, "resolve": (t5 - t4) * 1e3, "readback": (t6 - t5) * 1e3,
                   "frame": (t3 - t0 + t5 - t4) * 1e3, "total": (t6 - t0) * 1e3}
-            stats = FrameStats(self._stats((w, h), aa_, color_by, cmd, triangles, depth, device_samples, ms))
+            stats = FrameStats(self._stats((w, h), aa_, color_by, cmd, triangles, tg.pixels_written,
+                                           device_samples, ms))
             frames.append(Frame(color=color, depth=depth, normal=normal, object_id=ids, stats=stats,
                                 background=background))
         return frames

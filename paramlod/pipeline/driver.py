@@ -65,7 +65,7 @@ class Pipeline:
     def render_on_device(self, scene: Scene, camera: Camera, variant: str | None = None,
                          settings: RenderSettings | None = None) -> FrameStats:
         """One frame up to resolved buffers on the device (what an interactive viewer pays); its stats.
-        A gl pass is read back from OpenGL, and several passes are composited on the host."""
+        Several passes are composited on the host, which reads them back."""
         frame = self.render(scene, camera, variant, settings)
         return frame.stats
 

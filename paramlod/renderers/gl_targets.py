@@ -29,15 +29,18 @@ from __future__ import annotations
 
 import ctypes
 import math
+import weakref
 
 import moderngl
 import numpy as np
 
 from paramlod import kernels
+from paramlod.core.color import linear_to_srgb8_thresholds
+from paramlod.core.frame import Frame
 from paramlod.core.layouts import glsl_prelude
 from paramlod.device.context import gl_cache
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
-from paramlod.errors import DeviceError, SceneError
+from paramlod.errors import DeviceError, ParamlodError, SceneError
 from paramlod.renderers.aa import AAMode, cap_samples, parse_aa
 
 DRAW_MASK = ((True,) * 4,) * 4                        # colour, depth, normal, object id
@@ -102,6 +105,7 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
         # counter buffer the resolve reports the device's sample count into)
         common = [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
         prog = programs[key] = _full_screen_program(ctx, defs, common, "tess_resolve_fragment", "resolve")
+        prog["u_srgb8_thresholds"].write(linear_to_srgb8_thresholds().tobytes())
     return prog
 
 
@@ -117,13 +121,66 @@ def carry_vao(ctx, ratio: int, coarse_samples: int):
     return vao
 
 
+LENT_SETS = 3   # output sets that lent Frames may hold at once before the oldest is copied to the host
+
+
+class _OutputSet:
+    """One set of single-sampled output targets at ``size``: colour RGBA32F, depth R32F, normal
+    RGBA32F, object id R32UI and the 8-bit sRGB image RGBA8UI (attachments 0-4 of ``fbo``)."""
+
+    ARRAYS = {"color": ("color", np.float32, 4), "depth": ("depth", np.float32, 1),
+              "normal": ("normal", np.float32, 3), "object_id": ("object", np.uint32, 1),
+              "image": ("image", np.uint8, 3)}
+
+    def __init__(self, ctx, size):
+        self.ctx, self.size = ctx, tuple(size)
+        self.color = ctx.texture(size, 4, dtype="f4")
+        self.depth = ctx.texture(size, 1, dtype="f4")
+        self.normal = ctx.texture(size, 4, dtype="f4")
+        self.object = ctx.texture(size, 1, dtype="u4")
+        self.image = ctx.texture(size, 4, dtype="u1")
+        self.fbo = ctx.framebuffer([self.color, self.depth, self.normal, self.object, self.image])
+        self.background = (0.0, 0.0, 0.0)   # what the last resolve's image is composited over
+
+    def read(self, name: str) -> np.ndarray:
+        """The array ``name`` (a Frame array or "image"), contiguous, row 0 at the top."""
+        attr, dtype, keep = self.ARRAYS[name]
+        tex = getattr(self, attr, None)
+        if tex is None:
+            raise ParamlodError(f"this frame's {name} is gone: its OpenGL targets were released before it was read")
+        w, h = self.size
+        # current, and left so: paramlod's renderers expect their context current (moderngl's
+        # ``with ctx`` would leave none current on EGL)
+        self.ctx.__enter__()
+        a = np.frombuffer(tex.read(), dtype).reshape(h, w, tex.components)[::-1]
+        return np.ascontiguousarray(a[..., :keep] if keep > 1 else a[..., 0])
+
+    def release(self):
+        for name in ("fbo", "color", "depth", "normal", "object", "image"):
+            obj = self.__dict__.pop(name, None)
+            if obj is not None:
+                try:
+                    obj.release()
+                except Exception:
+                    pass
+
+
 class _Outputs:
-    """The single-sampled output targets at ``size`` the resolve draws into, and their readback."""
+    """The output targets the resolve draws into, and their readback: whole (``read``) or lazily
+    by the Frame that ``frame`` lends. A lent Frame keeps its set of targets until it is dropped
+    (the next resolve takes another set), as the OpenCL key buffer's outputs do; beyond
+    ``LENT_SETS`` held at once the oldest is copied to the host and its set reused."""
 
     def _release(self, *names):
-        """Release the moderngl objects ``names`` and the output targets, those that were made."""
-        for name in (*names, "resolve_vao", "out_fbo", "color_resolved", "out_color", "out_depth", "out_normal",
-                     "out_object", "samples_buffer"):
+        """Release the moderngl objects ``names`` and the output targets, those that were made
+        (lent Frames first copy what they have not read)."""
+        lent, free, out = (self.__dict__.pop(k, None) for k in ("_lent", "_free", "out"))
+        sets = [out] if out is not None else []
+        for key in list(lent or ()):
+            sets.append(self._take_back(key, lent))
+        for o in {id(o): o for o in (*sets, *(free or ()))}.values():   # the current set may be lent too
+            o.release()
+        for name in (*names, "resolve_vao", "color_resolved", "samples_buffer"):
             obj = self.__dict__.pop(name, None)
             if obj is not None:
                 try:
@@ -140,14 +197,58 @@ class _Outputs:
         raise DeviceError(f"could not create the {what}: {exc}") from None
 
     def _outputs(self, prog):
-        ctx, size = self.ctx, self.size
-        self.out_color = ctx.texture(size, 4, dtype="f4")
-        self.out_depth = ctx.texture(size, 1, dtype="f4")
-        self.out_normal = ctx.texture(size, 4, dtype="f4")
-        self.out_object = ctx.texture(size, 1, dtype="u4")
-        self.out_fbo = ctx.framebuffer([self.out_color, self.out_depth, self.out_normal, self.out_object])
-        self.samples_buffer = ctx.buffer(reserve=8)   # the resolve writes the device's sample count at [1]
-        self.resolve_vao = ctx.vertex_array(prog, [])
+        self.out = _OutputSet(self.ctx, self.size)   # the set the next resolve draws into
+        self._free: list[_OutputSet] = []            # sets no Frame holds
+        # id(set) -> (the set, a weak reference to the Frame that holds it, its finalizer), oldest first
+        self._lent: dict[int, tuple] = {}
+        # the resolve's counters (tess_common.glsl PlCounters): [1] the device's samples per pixel,
+        # [2] the pixels written
+        self.samples_buffer = self.ctx.buffer(reserve=16)
+        self.resolve_vao = self.ctx.vertex_array(prog, [])
+        self.pixels_written = 0
+
+    def _bind_resolve(self, background):
+        """Bind the output set this resolve draws into (one no Frame holds), its counters, zeroed,
+        and the background its image is composited over; returns the resolve program."""
+        if id(self.out) in self._lent:
+            if self._free:
+                self.out = self._free.pop()
+            elif len(self._lent) < LENT_SETS:
+                self.out = _OutputSet(self.ctx, self.size)
+            else:   # the oldest lent Frame copies its arrays to the host and gives its set back
+                self.out = self._take_back(next(iter(self._lent)), self._lent)
+        self.out.fbo.use()
+        self.out.background = tuple(float(x) for x in background)
+        self.samples_buffer.write(bytes(16))
+        self.samples_buffer.bind_to_storage_buffer(4)
+        prog = self.resolve_vao.program
+        set_uniform(prog, "u_background", self.out.background)
+        return prog
+
+    def frame(self) -> Frame:
+        """A Frame of the last resolve that reads its arrays and its 8-bit image on request
+        (paramlod.core.frame; the image is composited over the resolve's background); it holds
+        its output set until it is dropped."""
+        out = self.out
+        frame = Frame(source=out, size=out.size, background=out.background)
+        self._lent[id(out)] = (out, weakref.ref(frame), weakref.finalize(frame, self._given_back, id(out)))
+        return frame
+
+    @staticmethod
+    def _take_back(key: int, lent: dict) -> _OutputSet:
+        """The set ``lent[key]``, its Frame's arrays copied to the host first."""
+        out, ref, finalizer = lent.pop(key)
+        finalizer.detach()
+        frame = ref()
+        if frame is not None:
+            frame.materialize()
+        return out
+
+    def _given_back(self, key: int):
+        """A lent Frame was dropped: its set is free again."""
+        held = self.__dict__.get("_lent", {}).pop(key, None)
+        if held is not None and held[0] is not self.out:   # the current set is never in the free list
+            self._free.append(held[0])
 
     def _check_size(self):
         ctx, (w, h), ss = self.ctx, self.size, self.ss
@@ -159,12 +260,7 @@ class _Outputs:
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The resolved (colour [h, w, 4], depth [h, w], normal [h, w, 3], object id [h, w]),
         contiguous host arrays with row 0 at the top."""
-        w, h = self.size
-        color = np.frombuffer(self.out_color.read(), np.float32).reshape(h, w, 4)[::-1]
-        depth = np.frombuffer(self.out_depth.read(), np.float32).reshape(h, w)[::-1]
-        normal = np.frombuffer(self.out_normal.read(), np.float32).reshape(h, w, 4)[::-1, :, :3]
-        ids = np.frombuffer(self.out_object.read(), np.uint32).reshape(h, w)[::-1]
-        return tuple(np.ascontiguousarray(a) for a in (color, depth, normal, ids))
+        return tuple(self.out.read(name) for name in ("color", "depth", "normal", "object_id"))
 
 
 class GLTargets(_Outputs):
@@ -243,16 +339,15 @@ class GLTargets(_Outputs):
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         vao.render(mode=moderngl.TRIANGLES, vertices=3)
 
-    def resolve(self) -> int:
-        """Resolve what was drawn into the output targets (waits for the device); returns the
-        samples per pixel the device really allocated (llvmpipe gives 4 for a 2xMS request)."""
+    def resolve(self, background=(0.0, 0.0, 0.0)) -> int:
+        """Resolve what was drawn into the output targets (waits for the device), the image over
+        ``background``; returns the samples per pixel the device really allocated (llvmpipe gives
+        4 for a 2xMS request) and sets ``pixels_written``."""
         ctx = self.ctx
         if self.samples > 1:
             ctx.copy_framebuffer(self.color_resolved_fbo, self.color_ms_fbo)
         ctx.disable(moderngl.DEPTH_TEST)
-        self.out_fbo.use()
-        self.samples_buffer.bind_to_storage_buffer(4)
-        prog = self.resolve_vao.program
+        prog = self._bind_resolve(background)
         for unit, (name, tex) in enumerate((("u_color", self.color_resolved), ("u_coverage", self.color),
                                             ("u_depth", self.depth), ("u_normal", self.normal),
                                             ("u_object", self.object))):
@@ -260,7 +355,9 @@ class GLTargets(_Outputs):
             set_uniform(prog, name, unit)
         self.resolve_vao.render(mode=moderngl.TRIANGLES, vertices=3)
         ctx.finish()
-        return int(np.frombuffer(self.samples_buffer.read(8), np.uint32)[1])
+        counters = np.frombuffer(self.samples_buffer.read(16), np.uint32)
+        self.pixels_written = int(counters[2])
+        return int(counters[1])
 
     def release(self):
         self._release("fbo", "color_ms_fbo", "color_resolved_fbo", "color", "depth", "normal", "object", "zbuf")
@@ -423,7 +520,7 @@ class LayeredGLTargets(_Outputs):
         gl.glClearNamedFramebufferfv(self.fbo, GL_COLOR, 0, (ctypes.c_float * 4)(0.0, 0.0, 0.0, 0.0))
         gl.glClearNamedFramebufferfv(self.fbo, GL_DEPTH, 0, (ctypes.c_float * 1)(1.0))
 
-    def resolve(self, layer: int):
+    def resolve(self, layer: int, background=(0.0, 0.0, 0.0)):
         """Resolve layer ``layer`` into the output targets (not waited for: ``read`` waits)."""
         ctx, gl = self.ctx, self.gl
         if self.samples > 1:
@@ -432,9 +529,7 @@ class LayeredGLTargets(_Outputs):
             gl.glBlitNamedFramebuffer(self.layer_fbo, self.resolved_fbo, 0, 0, bw, bh, 0, 0, bw, bh,
                                       GL_COLOR_BUFFER_BIT, GL_NEAREST)
         ctx.disable(moderngl.DEPTH_TEST)
-        self.out_fbo.use()
-        self.samples_buffer.bind_to_storage_buffer(4)
-        prog = self.resolve_vao.program
+        prog = self._bind_resolve(background)
         color = self.color_resolved.glo if self.samples > 1 else self.color
         for unit, (name, tex) in enumerate((("u_color", color), ("u_coverage", self.color), ("u_depth", self.depth),
                                             ("u_normal", self.normal), ("u_object", self.object))):
@@ -444,9 +539,12 @@ class LayeredGLTargets(_Outputs):
         self.resolve_vao.render(mode=moderngl.TRIANGLES, vertices=3)
 
     def device_samples(self) -> int:
-        """The samples per pixel the device really allocated, as the last resolve saw (waits)."""
+        """The samples per pixel the device really allocated, as the last resolve saw (waits);
+        sets ``pixels_written`` of that layer."""
         self.ctx.finish()   # the resolve's storage write, visible to the read
-        return int(np.frombuffer(self.samples_buffer.read(8), np.uint32)[1])
+        counters = np.frombuffer(self.samples_buffer.read(16), np.uint32)
+        self.pixels_written = int(counters[2])
+        return int(counters[1])
 
     def release(self):
         self._release()

@@ -557,22 +557,18 @@ class TessRenderer:
         return [query], 1
 
     def _read_frame(self, tg, scene, msaa, notes) -> tuple[Frame, int, int, float, float]:
-        """Resolve ``tg`` and read it back: (Frame, the samples per pixel the device allocated,
-        pixels written, resolve ms, readback ms); a line in ``notes`` when the device allocated
-        other than ``msaa`` samples."""
+        """Resolve ``tg`` into a Frame that reads it back lazily (``GLTargets.frame``): (Frame,
+        the samples per pixel the device allocated, pixels written, resolve ms, readback ms: 0,
+        paid on access); a line in ``notes`` when the device allocated other than ``msaa``
+        samples."""
         t0 = time.perf_counter()
         # hardware multisample resolve of the colour, then the SSAA block in a shader
-        device_samples = tg.resolve()
+        device_samples = tg.resolve(scene.background)
         t1 = time.perf_counter()
-        color, depth, normal, ids = tg.read()
         if device_samples != msaa:
             notes.append(f"the device allocated {device_samples} samples per pixel for a {msaa}-sample "
                          "request; coverage and the depth/id resolve use all of them")
-        frame = Frame(color=color, depth=depth, normal=normal, object_id=ids)
-        frame.background = scene.background
-        written = int(np.count_nonzero(np.isfinite(depth)))
-        t2 = time.perf_counter()   # readback: textures to host arrays, flipped to row 0 = top
-        return frame, device_samples, written, (t1 - t0) * 1e3, (t2 - t1) * 1e3
+        return tg.frame(), device_samples, tg.pixels_written, (t1 - t0) * 1e3, 0.0
 
     def draw(self, render_list: np.ndarray, n: int | None, scene: Scene, camera: Camera,
              settings: TessSettings | None = None, threshold=None) -> Frame:

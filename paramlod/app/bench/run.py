@@ -205,28 +205,26 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
     apply_variant_settings(rs, name)
     if aa:
         rs.apply_aa(aa, variant=variant)
-    # the point variants run frame after frame without copying each to the host, as an
-    # interactive viewer does (a frame's 80 MB read-back at 1080p is no part of a viewer's frame,
-    # and the next frame's Python measured slower after it); one more frame, read back, gives
-    # the pixel statistics and the read-back time
-    on_device = variant != "tess"
+    # frames run one after another without copying each to the host, as an interactive viewer
+    # does (a frame's 80 MB read-back at 1080p is no part of a viewer's frame, and the next
+    # frame's Python measured slower after it); one more frame, read back, gives the pixel
+    # statistics and the read-back time
     rows = []
     for k in range(args.warmup + args.frames):
         cam = _orbit(base, centre, dist, k, args.frames, size)
         start_timing()
-        stats = render_on_device(scene, cam, variant, rs) if on_device else render(scene, cam, variant, rs).stats
+        stats = render_on_device(scene, cam, variant, rs)
         kernel_ms = stop_timing()
         if k >= args.warmup:
             rows.append((stats, kernel_ms))
     st = [r[0] for r in rows]
-    pixels = None
-    if on_device:   # the frame's image read back, then the rest of its arrays
-        extra = render(scene, cam, variant, rs)
-        t0 = time.perf_counter()
-        extra.rgb8()
-        t1 = time.perf_counter()
-        extra.materialize()
-        pixels = dict(extra.stats, image_readback_ms=(t1 - t0) * 1e3, readback_ms=(time.perf_counter() - t0) * 1e3)
+    # the frame's image read back, then the rest of its arrays
+    extra = render(scene, cam, variant, rs)
+    t0 = time.perf_counter()
+    extra.rgb8()
+    t1 = time.perf_counter()
+    extra.materialize()
+    pixels = dict(extra.stats, image_readback_ms=(t1 - t0) * 1e3, readback_ms=(time.perf_counter() - t0) * 1e3)
     frame = [_frame_ms(s["ms"]) for s in st]
     med = statistics.median
     out = {
@@ -249,9 +247,8 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         out["aa_effective"] = st[0].get("aa_effective")
         out["triangles"] = med(s.get("triangles", 0) for s in st)
         out["host_ms"] = None   # GL work is not timed by OpenCL events
-        out.update(pixels_written=med(s.get("pixels_written", 0) for s in st),
-                   overdraw=med(s.get("overdraw", 0.0) for s in st),
-                   readback_ms=med(s["ms"].get("readback", 0.0) for s in st))
+        out.update(pixels_written=pixels["pixels_written"], overdraw=pixels.get("overdraw", 0.0),
+                   readback_ms=pixels["readback_ms"], image_readback_ms=pixels["image_readback_ms"])
     else:
         # host: Python time preparing and enqueueing the frame (it overlaps the device's work);
         # idle: the part of the frame not covered by OpenCL kernels (launch gaps, waits, transfers)
