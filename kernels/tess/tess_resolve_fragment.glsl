@@ -57,20 +57,17 @@ uniform sampler2D u_color;
 // The 8-bit sRGB image over u_background that Frame.rgb8 returns (RGBA8UI, alpha 255), so that a
 // frame asked only for its image reads 4 bytes a pixel. Bit for bit the host's
 // linear_to_srgb8(rgb * a + background * (1 - a)) of out_color: the composite in float32 as
-// numpy computes it (precise: no fused multiply-add), and the code is the count of the encoder's
-// thresholds at or below the value (paramlod.core.color.linear_to_srgb8_thresholds): the
-// shader's own pow, whose rounding differs from numpy's, only guesses it to within one code.
+// numpy computes it (precise: no fused multiply-add), and the code from the encoder's table of
+// 1/PL_SRGB8_BUCKETS buckets (paramlod.core.color.linear_to_srgb8_buckets: the code of a bucket's
+// start and the one threshold inside it), not the shader's pow, whose rounding differs from numpy's.
 layout(location = 4) out uvec4 out_image;
 uniform vec3 u_background;
-uniform float u_srgb8_thresholds[255];   // [k - 1]: the least float encoded as k or more
+uniform sampler2D u_srgb8_buckets;   // RG32F, PL_SRGB8_BUCKETS x 1
 
 uint srgb8_code(float x) {
     x = clamp(x, 0.0, 1.0);
-    float s = x <= 0.0031308 ? 12.92 * x : 1.055 * pow(x, 1.0 / 2.4) - 0.055;
-    uint k = uint(clamp(s * 255.0 + 0.5, 0.0, 255.0));
-    while (k > 0u && x < u_srgb8_thresholds[k - 1u]) --k;     // the guess is at most one code off:
-    while (k < 255u && x >= u_srgb8_thresholds[k]) ++k;       // at most one step, exact whatever it was
-    return k;
+    vec2 b = texelFetch(u_srgb8_buckets, ivec2(min(int(x * float(PL_SRGB8_BUCKETS)), PL_SRGB8_BUCKETS - 1), 0), 0).rg;
+    return uint(b.x) + (x >= b.y ? 1u : 0u);
 }
 
 void main() {

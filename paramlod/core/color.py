@@ -6,7 +6,7 @@ the resolve in kernels/points/resolve.cl looks codes up in, and ``srgb8_threshol
 ``SRGB8_THRESHOLDS`` table that ``srgb8()`` in kernels/common/keys.cl searches; ``srgb_tables()``
 are uploaded for the integer encoder ``encode_srgb8`` in kernels/points/subsamples.cl
 (paramlod.renderers.targets). The tessellation shaders write linear colour; the GL resolve encodes
-the image with ``linear_to_srgb8_thresholds()``, the host's ``linear_to_srgb8`` bit for bit. The
+the image with ``linear_to_srgb8_buckets()``, the host's ``linear_to_srgb8`` bit for bit. The
 numpy twins of the kernels call the functions here.
 
 Two encoders share the curve and differ only in the precision of the arithmetic, which matters:
@@ -54,8 +54,7 @@ def linear_to_srgb8(c: np.ndarray) -> np.ndarray:
 def linear_to_srgb8_thresholds() -> np.ndarray:
     """float32 [255]: element k - 1 is the smallest float32 x with ``linear_to_srgb8(x)`` >= k, so
     the count of elements <= x is ``linear_to_srgb8(x)`` of a float32 x, bit for bit (checked for
-    every float32 in [0, 1]: the encoder is monotone there; below 0 both give 0, above 1 both 255).
-    The tess resolve's image encodes with them (kernels/tess/tess_resolve_fragment.glsl)."""
+    every float32 in [0, 1]: the encoder is monotone there; below 0 both give 0, above 1 both 255)."""
     codes = np.arange(1, 256)
     lo, hi = np.zeros(255, np.int64), np.full(255, _ONE_BITS, np.int64)   # bit patterns of 0.0 and 1.0
     while np.any(lo < hi):   # bisection over the bit patterns, which order non-negative floats
@@ -63,6 +62,27 @@ def linear_to_srgb8_thresholds() -> np.ndarray:
         up = linear_to_srgb8(mid.astype(np.uint32).view(np.float32)) >= codes
         lo, hi = np.where(up, lo, mid + 1), np.where(up, mid, hi)
     return hi.astype(np.uint32).view(np.float32)
+
+
+SRGB8_BUCKETS = 4096   # [0, 1] in buckets of 1/4096: each holds at most one of the 255 thresholds
+
+
+@functools.lru_cache(maxsize=None)
+def linear_to_srgb8_buckets() -> np.ndarray:
+    """float32 [SRGB8_BUCKETS, 2]: for bucket i, the values [i, i + 1) / SRGB8_BUCKETS, the code of
+    its start and the one threshold inside it (2.0 where none is), so that for a float32 x in
+    [0, 1], with i = min(floor(x * SRGB8_BUCKETS), SRGB8_BUCKETS - 1) (exact: a power of two),
+    code[i] + (x >= threshold[i]) is ``linear_to_srgb8(x)`` bit for bit: one table read where a
+    search of ``linear_to_srgb8_thresholds()`` takes several (the tess resolve's image)."""
+    thr = linear_to_srgb8_thresholds()
+    starts = (np.arange(SRGB8_BUCKETS) / SRGB8_BUCKETS).astype(np.float32)
+    out = np.stack([linear_to_srgb8(starts).astype(np.float32), np.full(SRGB8_BUCKETS, 2.0, np.float32)], axis=1)
+    inside = thr > starts[np.floor(thr.astype(np.float64) * SRGB8_BUCKETS).astype(int)]   # not at a start
+    buckets = np.floor(thr[inside].astype(np.float64) * SRGB8_BUCKETS).astype(int)
+    if len(np.unique(buckets)) != len(buckets):
+        raise AssertionError("two sRGB thresholds share a bucket: make SRGB8_BUCKETS larger")
+    out[buckets, 1] = thr[inside]
+    return out
 
 
 def linear_to_srgb8_f64(c: np.ndarray) -> np.ndarray:

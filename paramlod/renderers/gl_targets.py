@@ -35,7 +35,7 @@ import moderngl
 import numpy as np
 
 from paramlod import kernels
-from paramlod.core.color import linear_to_srgb8_thresholds
+from paramlod.core.color import SRGB8_BUCKETS, linear_to_srgb8_buckets
 from paramlod.core.frame import Frame
 from paramlod.core.layouts import glsl_prelude
 from paramlod.device.context import gl_cache
@@ -96,7 +96,7 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
     key = (ss, samples) if not layered else (ss, samples, "layered")
     prog = programs.get(key)
     if prog is None:
-        defs = {"PL_SS": ss, "PL_SAMPLES": samples}
+        defs = {"PL_SS": ss, "PL_SAMPLES": samples, "PL_SRGB8_BUCKETS": SRGB8_BUCKETS}
         if samples > 1:
             defs["PL_MS"] = 1
         if layered:
@@ -105,8 +105,18 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
         # counter buffer the resolve reports the device's sample count into)
         common = [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
         prog = programs[key] = _full_screen_program(ctx, defs, common, "tess_resolve_fragment", "resolve")
-        prog["u_srgb8_thresholds"].write(linear_to_srgb8_thresholds().tobytes())
     return prog
+
+
+def srgb8_buckets_texture(ctx):
+    """The resolve's sRGB encoding table (paramlod.core.color.linear_to_srgb8_buckets) as an
+    RG32F texture, cached."""
+    cache = gl_cache(ctx)
+    tex = cache.get("srgb8_buckets")
+    if tex is None:
+        tex = cache["srgb8_buckets"] = ctx.texture((SRGB8_BUCKETS, 1), 2, linear_to_srgb8_buckets().tobytes(), dtype="f4")
+        tex.filter = (ctx.NEAREST, ctx.NEAREST)
+    return tex
 
 
 def carry_vao(ctx, ratio: int, coarse_samples: int):
@@ -121,6 +131,7 @@ def carry_vao(ctx, ratio: int, coarse_samples: int):
     return vao
 
 
+RESOLVE_TABLE_UNIT = 5   # the resolve's texture units: 0-4 the targets, 5 the sRGB table
 LENT_SETS = 3   # output sets that lent Frames may hold at once before the oldest is copied to the host
 
 
@@ -223,6 +234,8 @@ class _Outputs:
         self.samples_buffer.bind_to_storage_buffer(4)
         prog = self.resolve_vao.program
         set_uniform(prog, "u_background", self.out.background)
+        srgb8_buckets_texture(self.ctx).use(location=RESOLVE_TABLE_UNIT)
+        set_uniform(prog, "u_srgb8_buckets", RESOLVE_TABLE_UNIT)
         return prog
 
     def frame(self) -> Frame:
