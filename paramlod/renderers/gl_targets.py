@@ -5,14 +5,16 @@ variant's clusters).
 Driven by ``paramlod.renderers.tess.TessRenderer`` and ``paramlod.meshlod.draw.MeshDraw``, each
 frame: ``targets_for`` (make or reuse targets for (size, supersampling, multisamples)),
 ``GLTargets.begin`` (bind and clear for drawing), the renderer's draw calls, ``GLTargets.resolve``
-and ``GLTargets.read``. The OpenCL renderers' counterpart is ``paramlod.renderers.targets``.
+and ``GLTargets.frame`` (a Frame read back lazily; ``read`` copies every array at once). The
+OpenCL renderers' counterpart is ``paramlod.renderers.targets``.
 
 Targets, at the supersampled size, multisampled or not: colour RGBA16F (linear RGB, alpha 1 where
 drawn), linear view depth R32F, world normal RGBA16F, object id R32UI, a depth renderbuffer. A
 fragment shader writes them at locations 0-3. The resolve (kernels/tess/tess_resolve_*.glsl, with
 the prelude and tess_common.glsl for its counter buffer): the hardware multisample resolve of the
 colour, box-averaged over the SSAA block (straight alpha = covered fraction); depth, normal and id of
-the nearest covered sample of the block, +inf / 0 / 0 where none is.
+the nearest covered sample of the block, +inf / 0 / 0 where none is; the 8-bit sRGB image over the
+background, the host's encoding bit for bit; the pixels written, counted.
 
 Hybrid anti-aliasing (the tess renderer's ``aa = "hybrid"``): each tier draws into its own
 targets, coarse to fine; a finer tier's targets start from a per-sample copy of a coarser tier's
