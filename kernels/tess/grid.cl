@@ -141,51 +141,87 @@ inline float2 grid_vertex_t(int8 L, int l) {
     return (float2)(0.0f, (float)(L.s0 - k) / (float)L.s0);
 }
 
-// One work-item per vertex of the patches [0, count), whose first vertices are vert_start (count +
-// 1 entries, the last the total): position and normal as the evaluation stage makes them
-// (tess_eval.glsl), where a degenerate parametrization takes the normal a little way towards the
-// patch centre. nan_count: the NaN/inf vertices.
+// The local vertex a patch's visit l reaches: the boundary as numbered; the inner grid row by row
+// (the numbering), or column by column where `columns` (a function whose split reads u: a column
+// keeps u, so its steps of u are evaluated once for the run).
+inline int grid_visit(int8 L, int l, bool columns) {
+    int rows = L.s5 - 1, inner = (L.s4 - 1) * rows;
+    return columns && l < inner ? (l % rows) * (L.s4 - 1) + l / rows : l;
+}
+
+#ifndef PL_RUN   // set by the host per device (paramlod/renderers/tess_grid.py RUN_GPU, RUN_CPU)
+#define PL_RUN 1u
+#endif
+
+// PL_RUN vertex visits a work-item, of the patches [0, count), whose first vertices are
+// vert_start (count + 1 entries, the last the total): position and normal as the evaluation stage
+// makes them (tess_eval.glsl), where a degenerate parametrization takes the normal a little way
+// towards the patch centre. nan_count: the NaN/inf vertices. With PL_RUN > 1 (CPU devices) a
+// function with a surface split (pl_split) evaluates the steps of its split parameter once for
+// the visits of a run that share it (consecutive visits of one grid row or column), bit for bit
+// what pl_surface gives (function/codegen_cl.py, "the surface split").
 __kernel void grid_vertices(__global const RenderPatch* patches, uint count, __global const int8* levels,
                             __global const uint* vert_start,
                             __global const float* inst_f, __global const uint* inst_u, __global const float* params,
                             float overlap, __global GridVertex* out, volatile __global uint* nan_count) {
-    uint g = get_global_id(0);
-    if (g >= vert_start[count]) return;
-    uint lo = 0, hi = count;   // the patch p with vert_start[p] <= g < vert_start[p + 1]
-    while (hi - lo > 1u) {
-        uint mid = (lo + hi) >> 1;
-        if (vert_start[mid] <= g) lo = mid; else hi = mid;
+#if PL_RUN > 1
+    float C[PL_SPLIT_FLOATS];
+    uint carried_patch = 0xffffffffu;   // C holds the split's steps at carried_at for this patch
+    float carried_at = 0.0f;
+#endif
+    for (uint r = 0; r < PL_RUN; ++r) {
+        uint g = get_global_id(0) * PL_RUN + r;
+        if (g >= vert_start[count]) return;
+        uint lo = 0, hi = count;   // the patch p with vert_start[p] <= g < vert_start[p + 1]
+        while (hi - lo > 1u) {
+            uint mid = (lo + hi) >> 1;
+            if (vert_start[mid] <= g) lo = mid; else hi = mid;
+        }
+        RenderPatch rp = patches[lo];
+        __global const float* I = inst_f + rp.inst * INST_F;
+        __global const uint* U = inst_u + rp.inst * INST_U;
+        __global const float* P = params + U[INST_PARAMS];
+        uint func = U[INST_FUNC];
+        uint split = PL_RUN > 1u ? pl_split(func) : 0u;
+        int8 L = levels[lo];
+        int l = grid_visit(L, (int)(g - vert_start[lo]), split == PL_SPLIT_U);
+        float2 t = grid_vertex_t(L, l);
+        float4 range = sampled_range(rp.range, I, overlap);
+        float u = grid_lerp(range.x, range.y, t.x), v = grid_lerp(range.z, range.w, t.y);
+        float uc = 0.5f * (rp.range.x + rp.range.y), vc = 0.5f * (rp.range.z + rp.range.w);
+        float3 pos, n;
+        for (int k = 0; k < 2; ++k) {
+            float f = k == 0 ? 0.0f : 1e-3f;
+            float3 p1, du1, dv1;
+#if PL_RUN > 1
+            if (split && k == 0) {
+                float at = split == PL_SPLIT_U ? u : v;
+                if (lo != carried_patch || at != carried_at) {
+                    pl_surface_axis(func, at, P, C);
+                    carried_patch = lo;
+                    carried_at = at;
+                }
+                pl_surface_rest(func, u, v, P, C, &p1, &du1, &dv1);
+            } else
+#endif
+            pl_surface(func, u + (uc - u) * f, v + (vc - v) * f, P, &p1, &du1, &dv1);
+            if (k == 0) pos = p1;
+            n = cross(du1, dv1);
+            if (dot(n, n) > 1e-12f * dot(du1, du1) * dot(dv1, dv1) || is_bad3(pos)) break;
+        }
+        GridVertex o;
+        o.pos = (float4)(0.0f, 0.0f, 0.0f, 1.0f);
+        float3 nw = (float3)(0.0f, 0.0f, 1.0f);
+        if (is_bad3(pos)) {
+            atomic_inc(nan_count);
+        } else {
+            o.pos = (float4)(rows_point(I + INST_MODEL, pos), 0.0f);
+            nw = rows_dir(I + INST_NORMAL, n);
+        }
+        o.normal0 = nw.x; o.normal1 = nw.y; o.normal2 = nw.z;
+        o.inst = rp.inst;
+        out[vert_start[lo] + (uint)l] = o;
     }
-    RenderPatch rp = patches[lo];
-    __global const float* I = inst_f + rp.inst * INST_F;
-    __global const uint* U = inst_u + rp.inst * INST_U;
-    __global const float* P = params + U[INST_PARAMS];
-    uint func = U[INST_FUNC];
-    float2 t = grid_vertex_t(levels[lo], (int)(g - vert_start[lo]));
-    float4 r = sampled_range(rp.range, I, overlap);
-    float u = grid_lerp(r.x, r.y, t.x), v = grid_lerp(r.z, r.w, t.y);
-    float uc = 0.5f * (rp.range.x + rp.range.y), vc = 0.5f * (rp.range.z + rp.range.w);
-    float3 pos, n;
-    for (int k = 0; k < 2; ++k) {
-        float f = k == 0 ? 0.0f : 1e-3f;
-        float3 p1, du1, dv1;
-        pl_surface(func, u + (uc - u) * f, v + (vc - v) * f, P, &p1, &du1, &dv1);
-        if (k == 0) pos = p1;
-        n = cross(du1, dv1);
-        if (dot(n, n) > 1e-12f * dot(du1, du1) * dot(dv1, dv1) || is_bad3(pos)) break;
-    }
-    GridVertex o;
-    o.pos = (float4)(0.0f, 0.0f, 0.0f, 1.0f);
-    float3 nw = (float3)(0.0f, 0.0f, 1.0f);
-    if (is_bad3(pos)) {
-        atomic_inc(nan_count);
-    } else {
-        o.pos = (float4)(rows_point(I + INST_MODEL, pos), 0.0f);
-        nw = rows_dir(I + INST_NORMAL, n);
-    }
-    o.normal0 = nw.x; o.normal1 = nw.y; o.normal2 = nw.z;
-    o.inst = rp.inst;
-    out[g] = o;
 }
 
 // local vertex of boundary side s (0..3: edges 1, 2, 3, 0, counter-clockwise from (u0, v0)), k in [0, its segments]: k = segments is

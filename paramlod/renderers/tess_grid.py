@@ -35,6 +35,10 @@ VERTICES, TRIANGLES = LEVELS.index("vertices"), LEVELS.index("triangles")
 # most vertices one list may make (32 bytes each: 2 GiB); more is an error that names the way out
 MAX_VERTICES = 1 << 26
 LOCAL_SIZE = 64
+# vertices a work-item of grid_vertices visits: runs down a grid row or column share the steps
+# of a surface split on CPU devices; GPUs keep one vertex a work-item (as the point renderer's
+# RUN_GPU / RUN_CPU, paramlod/renderers/points.py)
+RUN_GPU, RUN_CPU = 1, 16
 
 
 @dataclass
@@ -72,7 +76,10 @@ class GridTessellator:
     def __init__(self, functions):
         dev = cl_device()
         # on a CPU device the function code gets inline sin/cos, as the point renderer's does
-        defines = {} if dev.is_gpu else {POLY_TRIG: 1}
+        self.run = RUN_GPU if dev.is_gpu else RUN_CPU
+        defines = {"PL_RUN": self.run}
+        if not dev.is_gpu:
+            defines[POLY_TRIG] = 1
         program = build(["tess/grid.cl"], functions, defines)
         self._levels = cl.Kernel(program, "grid_levels")
         self._vertices = cl.Kernel(program, "grid_vertices")
@@ -113,7 +120,8 @@ class GridTessellator:
         nan = cla.zeros(q, 1, np.uint32)
         self._vertices.set_args(patches.data, np.uint32(n), levels.data, vert_start.data, *d["inst"],
                                 np.float32(settings.overlap), vertices.data, nan.data)
-        launch(q, self._vertices, (-(-n_vertices // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
+        items = -(-n_vertices // self.run)
+        launch(q, self._vertices, (-(-items // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
         self._indices.set_args(np.uint32(n), levels.data, vert_start.data, tri_start.data, indices.data)
         launch(q, self._indices, (-(-n // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
         return Grid(vertices.get(), indices.get(), lv, int(nan.get()[0]))

@@ -13,6 +13,9 @@ from paramlod.renderers import tess_grid
 from paramlod.renderers.tess import Tessellation, TessSettings
 from paramlod.renderers.tess_grid import GridTessellator
 from paramlod.renderers.tess_grid_reference import grid_levels, grid_topology
+from paramlod.core.layouts import GRID_VERTEX
+from paramlod.function.codegen_cl import SPLIT_U, SPLIT_V, surface_split
+from paramlod.scene.framing import framing_camera
 
 
 def render_list(scene, camera, threshold=84.0, overlap=None):
@@ -67,6 +70,34 @@ def test_triangles_and_vertices_match_the_numpy_twin():
     expect = scene.functions()[0].evaluate(u.astype(np.float64), v.astype(np.float64))
     np.testing.assert_allclose(grid.vertices["pos"][:, :3], expect, atol=1e-5)
     assert np.all(grid.vertices["pos"][:, 3] == 0) and grid.nan_vertices == 0
+
+
+def test_runs_of_split_functions_give_the_vertices_bit_for_bit(monkeypatch):
+    # the fibre's split reads u (runs down inner-grid columns), a seashell's v (rows), the sphere
+    # has none: runs of 3 and 16 visits a work-item (CPU devices; runs cross patches) give the
+    # vertices of one visit a work-item evaluated whole (PL_RUN 1, as on GPUs) bit for bit, and
+    # every vertex is written
+    scene = pl.Scene()
+    scene.add("fiber", material=pl.Material(color=(0.8, 0.5, 0.3)))
+    scene.add("seashell1", transform=pl.translate(9.0, 0.0, 0.0) @ pl.scale(0.6))
+    scene.add("sphere", transform=pl.translate(-4.0, 0.0, 0.0) @ pl.scale(2.0))
+    assert [None if s is None else s.axis for s in map(surface_split, scene.functions())] == [SPLIT_U, SPLIT_V, None]
+    cam = framing_camera(scene, size=(240, 144))
+    records = render_list(scene, cam, threshold=12.0)
+    settings = TessSettings(mode="chord", chord_px=0.25, l_min=1.0)
+    grids = []
+    for run in (1, 3, 16):
+        monkeypatch.setattr(tess_grid, "RUN_CPU", run)
+        grid = GridTessellator(scene.functions()).tessellate(records, scene, cam, settings, (12.0, 12.0))
+        grids.append(grid.vertices.view(np.uint8))
+    assert len(records) > 100 and len(grids[0]) > 3000 * GRID_VERTEX.dtype.itemsize
+    # every vertex written: its patch's instance and a normal (not normalized; the output is not cleared)
+    inst = np.repeat(records["inst"], grid.levels[:, tess_grid.VERTICES])
+    np.testing.assert_array_equal(grid.vertices["inst"], inst)
+    assert set(np.unique(inst)) == {0, 1, 2}
+    assert np.all(np.linalg.norm(grid.vertices["normal"], axis=1) > 0)
+    for other in grids[1:]:
+        np.testing.assert_array_equal(other, grids[0])
 
 
 def test_each_patch_is_tiled_by_counter_clockwise_triangles():
