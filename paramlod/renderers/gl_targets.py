@@ -169,13 +169,18 @@ class _OutputSet:
         return np.ascontiguousarray(a[..., :keep] if keep > 1 else a[..., 0])
 
     def release(self):
-        for name in ("fbo", "color", "depth", "normal", "object", "image"):
-            obj = self.__dict__.pop(name, None)
-            if obj is not None:
-                try:
-                    obj.release()
-                except Exception:
-                    pass
+        _release_attributes(self, ("fbo", "color", "depth", "normal", "object", "image"))
+
+
+def _release_attributes(owner, names):
+    """Release the moderngl objects ``owner`` holds as ``names``, those that were made."""
+    for name in names:
+        obj = owner.__dict__.pop(name, None)
+        if obj is not None:
+            try:
+                obj.release()
+            except Exception:
+                pass
 
 
 class _Outputs:
@@ -193,13 +198,7 @@ class _Outputs:
             sets.append(self._take_back(key, lent))
         for o in {id(o): o for o in (*sets, *(free or ()))}.values():   # the current set may be lent too
             o.release()
-        for name in (*names, "resolve_vao", "color_resolved", "samples_buffer"):
-            obj = self.__dict__.pop(name, None)
-            if obj is not None:
-                try:
-                    obj.release()
-                except Exception:
-                    pass
+        _release_attributes(self, (*names, "resolve_vao", "color_resolved", "samples_buffer"))
 
     def _failed(self, exc: Exception, what: str):
         """Release what a constructor made before ``exc``, then raise it as a DeviceError naming
