@@ -596,10 +596,12 @@ class GrowBuffer:
     def __init__(self, ctx, nbytes: int = 16):
         self.ctx, self.buf, self.generation = ctx, ctx.buffer(reserve=max(16, nbytes)), 0
 
-    def write(self, data: bytes):
-        if len(data) > self.buf.size:
+    def write(self, data):
+        """Write ``data`` (bytes, or a C-contiguous array: written without a copy) at the start."""
+        nbytes = memoryview(data).nbytes
+        if nbytes > self.buf.size:
             self.buf.release()
-            self.buf = self.ctx.buffer(reserve=1 << int(math.ceil(math.log2(len(data)))))
+            self.buf = self.ctx.buffer(reserve=1 << int(math.ceil(math.log2(nbytes))))
             self.generation += 1
-        if data:
+        if nbytes:
             self.buf.write(data)

@@ -538,8 +538,8 @@ class TessRenderer:
         if self._grid is None:
             self._grid = GridTessellator(self.functions)
         grid = self._grid.tessellate(patches, scene, camera, settings, threshold)
-        self._grid_vertices.write(grid.vertices.tobytes())
-        self._grid_indices.write(grid.indices.tobytes())
+        self._grid_vertices.write(grid.vertices)   # contiguous arrays: no copy on the host
+        self._grid_indices.write(grid.indices)
         if grid.nan_vertices:
             counted = np.frombuffer(self._counters.read(4), np.uint32)[0]
             self._counters.write(np.uint32(counted + grid.nan_vertices).tobytes())
