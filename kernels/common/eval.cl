@@ -1,8 +1,9 @@
 // Evaluates parametric functions at given (u, v): the bridge between the generated OpenCL code and
 // the numpy references (tests, `check_compiles`, throughput benchmarks). One work-item per sample.
-// out: 21 floats per sample = position and partials from pl_surface (pos, du, dv), the position
-// from pl_position, and position and partials from the surface split (pl_surface_axis, then
-// pl_surface_rest; every entry point is checked). Twins: ParametricFunction.evaluate and
+// out: 24 floats per sample = position and partials from pl_surface (pos, du, dv), the position
+// from pl_position, position and partials from the surface split (pl_surface_axis, then
+// pl_surface_rest) and the position from the position split (pl_position_axis, then
+// pl_position_rest; every entry point is checked). Twins: ParametricFunction.evaluate and
 // .surface (paramlod/function/define.py); the throughput kernels below are driven by
 // paramlod/app/bench/functions.py.
 __kernel void eval_samples(uint func, __global const float* uv, uint n,
@@ -19,7 +20,10 @@ __kernel void eval_samples(uint func, __global const float* uv, uint n,
     if (split) pl_surface_axis(func, split == PL_SPLIT_U ? u : v, params, C);
     float3 spos, sdu, sdv;
     pl_surface_rest(func, u, v, params, C, &spos, &sdu, &sdv);
-    __global float* o = out + 21 * i;
+    uint psplit = pl_position_split(func);
+    if (psplit) pl_position_axis(func, psplit == PL_SPLIT_U ? u : v, params, C);
+    float3 ppos = pl_position_rest(func, u, v, params, C);
+    __global float* o = out + 24 * i;
     o[0] = pos.x; o[1] = pos.y; o[2] = pos.z;
     o[3] = du.x;  o[4] = du.y;  o[5] = du.z;
     o[6] = dv.x;  o[7] = dv.y;  o[8] = dv.z;
@@ -27,6 +31,7 @@ __kernel void eval_samples(uint func, __global const float* uv, uint n,
     o[12] = spos.x; o[13] = spos.y; o[14] = spos.z;
     o[15] = sdu.x;  o[16] = sdu.y;  o[17] = sdu.z;
     o[18] = sdv.x;  o[19] = sdv.y;  o[20] = sdv.z;
+    o[21] = ppos.x; o[22] = ppos.y; o[23] = ppos.z;
 }
 
 // Throughput variant: positions only, summed so that the compiler cannot drop the work.

@@ -59,10 +59,9 @@ typedef struct {
 
 #include "lod/spot.cl"
 
-// A sample's world position (after the instance transform), once per patch for every view;
-// w is 1 for a NaN/inf position (bad in every view).
-inline float4 lod_world(uint func, __global const float* P, __global const float* I, float u, float v) {
-    float3 p = pl_position(func, u, v, P);
+// A sample's world position (after the instance transform) from its position p, once per patch
+// for every view; w is 1 for a NaN/inf position (bad in every view).
+inline float4 lod_world(__global const float* I, float3 p) {
     if (is_bad3(p)) return (float4)(0.0f, 0.0f, 0.0f, 1.0f);
     return (float4)(xform_point(I + INST_MODEL, p), 0.0f);
 }
@@ -353,6 +352,10 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
 // Where sample s of a patch lies (s < LOD_SAMPLES): 0..31 the four u-lines (8 samples each, at
 // v = 1/8, 3/8, 5/8, 7/8 of the range), 32..63 the four v-lines, 64..88 the 5x5 extra grid.
 #define LOD_SAMPLES 89
+#ifndef LOD_RUN   // set by the host on CPU devices (paramlod/lod/stage.py SAMPLE_RUNS_CPU)
+#define LOD_RUN 0
+#endif
+#define LOD_RUN_LENGTH ((LOD_SAMPLES + LOD_GROUP - 1) / LOD_GROUP)
 inline float2 lod_uv(uint s, float u0, float v0, float du, float dv) {
     if (s < 64u) {
         uint k = (s & 31u) >> 3, i = s & 7u;
@@ -363,6 +366,18 @@ inline float2 lod_uv(uint s, float u0, float v0, float du, float dv) {
     }
     uint e = s - 64u;
     return (float2)(u0 + du * ((float)(e % 5u) * 0.25f), v0 + dv * ((float)(e / 5u) * 0.25f));
+}
+
+// LOD_RUN (CPU devices): a work-item evaluates a run of consecutive samples in this order, which
+// puts the samples that share the position split's parameter (pl_position_split) next to each
+// other, so that parameter's steps are evaluated once for them: along u, the u-lines' samples by
+// index, then the v-lines, then the 5x5 grid by column; along v, the u-lines, the v-lines'
+// samples by index, the grid by row. Returns the sample at place j.
+inline uint lod_order(uint split, uint j) {
+    if (split == PL_SPLIT_U && j < 32u) return (j & 3u) * 8u + (j >> 2);
+    if (split == PL_SPLIT_V && j >= 32u && j < 64u) return 32u + ((j - 32u) & 3u) * 8u + ((j - 32u) >> 2);
+    if (split == PL_SPLIT_U && j >= 64u) return 64u + ((j - 64u) % 5u) * 5u + (j - 64u) / 5u;
+    return j;
 }
 
 inline Sample lod_at(__local const float2* pos, __local const uchar* state, uint s) {
@@ -456,10 +471,33 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
         __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
         float u0 = patch.range.x, v0 = patch.range.z;
         float du = patch.range.y - u0, dv = patch.range.w - v0;
+#if LOD_RUN
+        {   // a run of samples a work-item (lod_order), the split's steps once for those sharing them:
+            // the positions pl_position gives, bit for bit
+            uint split = pl_position_split(func);
+            float C[PL_SPLIT_FLOATS];
+            float carried_at = NAN;   // never equal: the first sample evaluates the steps
+            uint first = l * LOD_RUN_LENGTH, end = min(first + LOD_RUN_LENGTH, (uint)LOD_SAMPLES);
+            for (uint j = first; j < end; ++j) {
+                uint s = lod_order(split, j);
+                float2 uv = lod_uv(s, u0, v0, du, dv);
+                float3 p;
+                if (split) {
+                    float at = split == PL_SPLIT_U ? uv.x : uv.y;
+                    if (at != carried_at) { pl_position_axis(func, at, P, C); carried_at = at; }
+                    p = pl_position_rest(func, uv.x, uv.y, P, C);
+                } else {
+                    p = pl_position(func, uv.x, uv.y, P);
+                }
+                wpos[s] = lod_world(I, p);
+            }
+        }
+#else
         for (uint s = l; s < LOD_SAMPLES; s += LOD_GROUP) {
             float2 uv = lod_uv(s, u0, v0, du, dv);
-            wpos[s] = lod_world(func, P, I, uv.x, uv.y);
+            wpos[s] = lod_world(I, pl_position(func, uv.x, uv.y, P));
         }
+#endif
         // the same for every work-item of the group (one patch), so barriers stay uniform
         bool one_sided = backface != 0u && (inst_u[inst * INST_U + INST_FLAGS] & INST_ONE_SIDED) != 0u;
         if (one_sided) {

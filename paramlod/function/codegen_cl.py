@@ -8,7 +8,9 @@ For each function index i the generated source defines
 
 and two dispatchers ``pl_position(func, ...)`` / ``pl_surface(func, ...)`` that switch on the index,
 which the kernels in ``kernels/`` call; and the surface split (``split_surface``): ``pl_axis_i`` /
-``pl_rest_i`` with the dispatchers ``pl_split``, ``pl_surface_axis`` and ``pl_surface_rest``.
+``pl_rest_i`` with the dispatchers ``pl_split``, ``pl_surface_axis`` and ``pl_surface_rest``; the
+same of the position-only code (``position_split``): ``pl_paxis_i`` / ``pl_prest_i`` with
+``pl_position_split``, ``pl_position_axis`` and ``pl_position_rest``.
 
 Snippet functions (``@parametric(..., snippet=...)``) are emitted as ``pl_snip_i`` with the
 dialect macros of ``kernels/dialect.cl`` in front; their partials are central differences.
@@ -467,9 +469,9 @@ def _cl_function_source(fn: ParametricFunction, index: int, optimize: bool = Tru
     loads = param_lines(fn)
     program = fn.device_program if optimize else fn.program   # unoptimised: parameter terms per sample too
     bindings, outputs = program("position")
-    lines, (x, y, z) = function_body(fn, outputs, bindings=bindings, optimize=optimize, sincos=optimize)
-    pos = (f"inline float3 pl_pos_{index}(float u, float v, __global const float* P) {{\n"
-           + "\n".join(loads + lines) + f"\n    return (float3)({x}, {y}, {z});\n}}\n")
+    low_pos = lower(outputs, bindings, optimize=optimize, sincos=optimize)
+    pos = _position_source(fn, f"pl_pos_{index}(float u, float v, __global const float* P)",
+                           loads + step_lines(fn, low_pos.steps), low_pos.outputs)
     bindings, outputs = program("surface")
     low = lower(outputs, bindings, optimize=optimize, sincos=optimize)
     surf = _surface_source(fn, f"pl_surf_{index}(float u, float v, __global const float* P,",
@@ -477,11 +479,14 @@ def _cl_function_source(fn: ParametricFunction, index: int, optimize: bool = Tru
     if not optimize:
         return head + pos + surf
     split = _splits[fn] = split_surface(fn, low)
-    return head + pos + surf + (_split_source(fn, index, loads, split) if split else "")
+    split_pos = _position_splits[fn] = split_surface(fn, low_pos)
+    return (head + pos + surf + (_split_source(fn, index, loads, split) if split else "")
+            + (_split_source(fn, index, loads, split_pos, position=True) if split_pos else ""))
 
 
-# the split of each function's generated surface code (None: none), filled with its source
+# the split of each function's generated surface and position code (None: none), filled with its source
 _splits: "weakref.WeakKeyDictionary[ParametricFunction, SplitSurface | None]" = weakref.WeakKeyDictionary()
+_position_splits: "weakref.WeakKeyDictionary[ParametricFunction, SplitSurface | None]" = weakref.WeakKeyDictionary()
 
 
 def surface_split(fn: ParametricFunction) -> SplitSurface | None:
@@ -493,6 +498,21 @@ def surface_split(fn: ParametricFunction) -> SplitSurface | None:
     return _splits[fn]
 
 
+def position_split(fn: ParametricFunction) -> SplitSurface | None:
+    """The split of the position-only code of ``fn`` (None: pl_position_rest calls pl_pos_i); its
+    axis may differ from the surface split's."""
+    if fn.is_snippet:
+        return None
+    if fn not in _position_splits:
+        cl_function_source(fn, 0)
+    return _position_splits[fn]
+
+
+def _position_source(fn, head: str, lines, outputs) -> str:
+    x, y, z = (_print_checked(_printer, e, fn) for e in outputs)
+    return f"inline float3 {head} {{\n" + "\n".join(lines) + f"\n    return (float3)({x}, {y}, {z});\n}}\n"
+
+
 def _surface_source(fn, head: str, lines, outputs) -> str:
     r = [_print_checked(_printer, e, fn) for e in outputs]
     return (f"inline void {head} float3* pos, float3* du, float3* dv) {{\n" + "\n".join(lines)
@@ -501,9 +521,10 @@ def _surface_source(fn, head: str, lines, outputs) -> str:
             + f"\n    *dv = (float3)({r[6]}, {r[7]}, {r[8]});\n}}\n")
 
 
-def _split_source(fn: ParametricFunction, index: int, loads, split: SplitSurface) -> str:
+def _split_source(fn: ParametricFunction, index: int, loads, split: SplitSurface, position: bool = False) -> str:
     """pl_axis_i (the axis steps; the carried values stored in C) and pl_rest_i (the carried values
-    loaded from C, the other steps, the outputs)."""
+    loaded from C, the other steps, the outputs); pl_paxis_i and pl_prest_i for the position-only
+    code (``position``)."""
     name = _printer.doprint(fn.u if split.axis == SPLIT_U else fn.v)
     conditions = {st[0] for st in split.axis_steps
                   if not isinstance(st, SinCos) and isinstance(st[1], sp.logic.boolalg.Boolean)}
@@ -516,11 +537,15 @@ def _split_source(fn: ParametricFunction, index: int, loads, split: SplitSurface
         else:
             store.append(f"    C[{k}] = {name_k};")
             load.append(f"    const float {name_k} = C[{k}];")
-    axis = (f"inline void pl_axis_{index}(float {name}, __global const float* P, float* C) {{\n"
+    p = "p" if position else ""
+    axis = (f"inline void pl_{p}axis_{index}(float {name}, __global const float* P, float* C) {{\n"
             + "\n".join(loads + step_lines(fn, split.axis_steps) + store) + "\n}\n")
-    rest = _surface_source(fn, f"pl_rest_{index}(float u, float v, __global const float* P, const float* C,",
-                           loads + load + step_lines(fn, split.rest_steps), split.outputs)
-    return axis + rest
+    lines = loads + load + step_lines(fn, split.rest_steps)
+    if position:
+        return axis + _position_source(fn, f"pl_prest_{index}(float u, float v, __global const float* P, const float* C)",
+                                       lines, split.outputs)
+    return axis + _surface_source(fn, f"pl_rest_{index}(float u, float v, __global const float* P, const float* C,",
+                                  lines, split.outputs)
 
 
 def cl_dispatch_source(functions: list[ParametricFunction], optimize: bool = True) -> str:
@@ -545,10 +570,22 @@ def cl_dispatch_source(functions: list[ParametricFunction], optimize: bool = Tru
 
 
 def _split_dispatch(functions: list[ParametricFunction], optimize: bool) -> str:
-    """pl_split(func) (SPLIT_NONE / SPLIT_U / SPLIT_V), pl_surface_axis and pl_surface_rest, and
+    """pl_split(func) (SPLIT_NONE / SPLIT_U / SPLIT_V), pl_surface_axis and pl_surface_rest; the
+    same for the position-only code (pl_position_split, pl_position_axis, pl_position_rest); and
     PL_SPLIT_FLOATS (the carried values of the largest split: the size of C)."""
     splits = [surface_split(f) if optimize else None for f in functions]
-    floats = max([1] + [len(s.carried) for s in splits if s])
+    psplits = [position_split(f) if optimize else None for f in functions]
+    floats = max([1] + [len(s.carried) for s in splits + psplits if s])
+    pkinds = "".join(f"        case {i}: return {s.axis}u;\n" for i, s in enumerate(psplits) if s)
+    paxis = "".join(f"        case {i}: pl_paxis_{i}(a, P, C); return;\n" for i, s in enumerate(psplits) if s)
+    prest = "".join(f"        case {i}: return pl_prest_{i}(u, v, P, C);\n" if s else
+                    f"        case {i}: return pl_pos_{i}(u, v, P);\n" for i, s in enumerate(psplits))
+    position = ("inline uint pl_position_split(uint func) {\n"
+                f"    switch (func) {{\n{pkinds}    }}\n    return 0u;\n}}\n"
+                "inline void pl_position_axis(uint func, float a, __global const float* P, float* C) {\n"
+                f"    switch (func) {{\n{paxis}    }}\n}}\n"
+                "inline float3 pl_position_rest(uint func, float u, float v, __global const float* P, const float* C) {\n"
+                f"    switch (func) {{\n{prest}    }}\n    return (float3)(NAN, NAN, NAN);\n}}\n")
     kinds = "".join(f"        case {i}: return {s.axis}u;\n" for i, s in enumerate(splits) if s)
     axis = "".join(f"        case {i}: pl_axis_{i}(a, P, C); return;\n" for i, s in enumerate(splits) if s)
     rest = "".join(f"        case {i}: pl_rest_{i}(u, v, P, C, pos, du, dv); return;\n" if s else
@@ -560,4 +597,4 @@ def _split_dispatch(functions: list[ParametricFunction], optimize: bool) -> str:
             "inline void pl_surface_rest(uint func, float u, float v, __global const float* P, const float* C,"
             " float3* pos, float3* du, float3* dv) {\n"
             f"    switch (func) {{\n{rest}    }}\n"
-            "    *pos = *du = *dv = (float3)(NAN, NAN, NAN);\n}\n")
+            "    *pos = *du = *dv = (float3)(NAN, NAN, NAN);\n}\n" + position)

@@ -170,7 +170,8 @@ def check_compiles(fn) -> None:
 
 def evaluate_cl(fn: ParametricFunction, u, v, block=None, functions=None, split: bool = False, **params):
     """Evaluate ``fn`` on the OpenCL device at float32 (u, v): (pos, du, dv, pos_only), each (..., 3);
-    with ``split``, also (pos, du, dv) of the generated code's surface split (codegen_cl.split_surface).
+    with ``split``, also (pos, du, dv) of the generated code's surface split and pos of its
+    position split (codegen_cl.split_surface).
 
     The device-side twin of ``fn.surface``. ``functions`` (which must contain ``fn``) is the set the
     program is built for: pass the same list for several functions to compile once.
@@ -192,11 +193,11 @@ def evaluate_cl(fn: ParametricFunction, u, v, block=None, functions=None, split:
     k = kernel("eval_samples", ["common/eval.cl"], funcs)   # built once per set of functions, then cached
     d_uv = cla.to_device(q, np.ascontiguousarray(uv, np.float32))
     d_p = cla.to_device(q, np.concatenate([fn.device_blocks(np.asarray(block, np.float32).reshape(-1)), np.zeros(1, np.float32)]))
-    d_out = cla.empty(q, max(1, n) * 21, np.float32)
+    d_out = cla.empty(q, max(1, n) * 24, np.float32)
     k(q, (max(1, n),), None, np.uint32(index), d_uv.data, np.uint32(n), d_p.data, d_out.data)
-    out = d_out.get()[:n * 21].reshape(shape + (7, 3)).astype(np.float64)
+    out = d_out.get()[:n * 24].reshape(shape + (8, 3)).astype(np.float64)
     values = tuple(out[..., i, :] for i in range(4))
-    return values + (tuple(out[..., i, :] for i in range(4, 7)),) if split else values
+    return values + (tuple(out[..., i, :] for i in range(4, 8)),) if split else values
 
 
 def measure_throughput(fn: ParametricFunction, side: int = 512, repeats: int = 3, block=None) -> float:

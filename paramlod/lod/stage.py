@@ -120,6 +120,7 @@ LOD_RENDER_TOTAL = LOD_COUNTER.constant("LOD_RENDER_TOTAL")   # counters[0, 1]: 
 LOD_LOCAL = constant("LOD_LOCAL")   # work-items measuring one patch together (kernels/lod/lod.cl)
 # views one work-group projects at once (local memory: 89 x 9 bytes a view)
 LOD_MAX_SLOTS = 8
+SAMPLE_RUNS_CPU = True   # kernels/lod/lod.cl LOD_RUN on CPU devices (GPUs: one sample a work-item in turn)
 LOD_MAX_GROUP = 256   # work-items a patch at most (every OpenCL GPU takes 256)
 
 
@@ -269,6 +270,8 @@ class LodStage:
             defines = {"LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots}
             if not cl_device().is_gpu:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
                 defines[POLY_TRIG] = 1
+                # runs of samples that share the position split's steps (kernels/lod/lod.cl lod_order)
+                defines["LOD_RUN"] = int(SAMPLE_RUNS_CPU)
             prog = build(["lod/lod.cl"], self._functions, defines=defines)
             self._step_kernels[layout] = [cl.Kernel(prog, "lod_step") for _ in range(15)]
         return layout, self._step_kernels[layout]

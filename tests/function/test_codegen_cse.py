@@ -12,7 +12,7 @@ from paramlod.app.bench.functions import (_fma_kernel, count_flops, fma_ceiling_
                                           peak_from_info)
 from paramlod.device.context import cl_device
 from paramlod.function.codegen_cl import (SPLIT_MIN_OPS, SPLIT_U, SPLIT_V, SinCos, cl_function_source,
-                                          function_body, lower, surface_split)
+                                          function_body, lower, position_split, surface_split)
 from paramlod.function.codegen_glsl import glsl_function_source
 from paramlod.function.plugins import evaluate_cl
 from paramlod.function.registry import builtin_functions
@@ -50,17 +50,19 @@ def test_cse_code_equals_the_numpy_twin_for_every_builtin_and_sh_order():
 
 
 def test_the_surface_split_gives_pl_surface_bit_for_bit():
-    # a point renderer evaluates split functions in two parts (the axis steps once per grid line):
-    # the samples must be the ones pl_surface gives, to the bit
+    # a point renderer evaluates split functions in two parts (the axis steps once per grid line),
+    # the LOD stage and the grid tessellator their positions: the samples must be the ones
+    # pl_surface and pl_position give, to the bit
     funcs = list(FUNCS.values())
-    split = 0
+    split = psplit = 0
     for name, fn in FUNCS.items():
         u, v = _uv(fn, seed=3)
-        pos, du, dv, _, (spos, sdu, sdv) = evaluate_cl(fn, u, v, functions=funcs, split=True)
-        for a, b in ((spos, pos), (sdu, du), (sdv, dv)):
+        pos, du, dv, pos_only, (spos, sdu, sdv, ppos) = evaluate_cl(fn, u, v, functions=funcs, split=True)
+        for a, b in ((spos, pos), (sdu, du), (sdv, dv), (ppos, pos_only)):
             np.testing.assert_array_equal(a.view(np.int64), b.view(np.int64), err_msg=name)
         split += surface_split(fn) is not None
-    assert split >= 8
+        psplit += position_split(fn) is not None
+    assert split >= 8 and psplit >= 8
 
 
 @pytest.mark.parametrize("name, axis, share", [("fiber", SPLIT_U, 0.9), ("yarn", SPLIT_U, 0.75),

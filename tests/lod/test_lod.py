@@ -50,6 +50,29 @@ def test_cl_lod_matches_numpy_reference(fname, eye, target):
     np.testing.assert_allclose(gext, rext, rtol=1e-3, atol=1e-3)
 
 
+def test_runs_of_split_samples_give_the_same_render_list(monkeypatch):
+    # on CPU devices a work-item evaluates a run of samples, the steps of the position split's
+    # parameter once for those sharing it (kernels/lod/lod.cl lod_order): fibre and glyph split
+    # along u, the sphere not at all; the render list is the one of one sample at a time, bit for bit
+    from paramlod.function.codegen_cl import SPLIT_U, position_split
+    from paramlod.lod import stage as stage_module
+
+    scene = pl.Scene()
+    scene.add("fiber", transform=pl.scale(0.2))
+    scene.add("sh_glyph", transform=pl.translate(1.5, 0, 0) @ pl.scale(0.5))
+    scene.add("sphere", transform=pl.translate(-1.5, 0, 0) @ pl.scale(0.5))
+    assert [None if p is None else p.axis for p in map(position_split, scene.functions())] == [SPLIT_U, SPLIT_U, None]
+    cam = pl.Camera.look_at((0.3, 0.8, 4.0), (0, 0, 0), size=(320, 240))
+    lists = []
+    for runs in (False, True):
+        monkeypatch.setattr(stage_module, "SAMPLE_RUNS_CPU", runs)
+        got, steps = cl_render_list(scene, cam, pl.LodSettings(threshold=(24.0, 24.0)))
+        lists.append((got[sort_key(got)].view(np.uint8), steps))   # in one order (atomics append)
+    assert len(lists[0][0]) > 100 * got.dtype.itemsize and len(lists[0][1]) >= 3
+    np.testing.assert_array_equal(lists[1][0], lists[0][0])
+    assert lists[1][1] == lists[0][1]
+
+
 def test_stage_follows_the_view_from_far_to_near_and_back():
     """A stage enqueues only the steps the previous one needed, plus one: zooming in past that
     must redo the stage with all steps, never force patches out early."""
