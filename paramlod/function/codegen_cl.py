@@ -569,6 +569,16 @@ def cl_dispatch_source(functions: list[ParametricFunction], optimize: bool = Tru
     return "\n".join(parts)
 
 
+def _axis_dispatch(splits, split_name: str, axis_name: str, axis_fn: str) -> str:
+    """``split_name``(func), the axis of ``splits`` (one per function, None: none), and
+    ``axis_name``(func, a, P, C), which calls ``axis_fn``_i."""
+    kinds = "".join(f"        case {i}: return {s.axis}u;\n" for i, s in enumerate(splits) if s)
+    axis = "".join(f"        case {i}: {axis_fn}_{i}(a, P, C); return;\n" for i, s in enumerate(splits) if s)
+    return (f"inline uint {split_name}(uint func) {{\n    switch (func) {{\n{kinds}    }}\n    return 0u;\n}}\n"
+            f"inline void {axis_name}(uint func, float a, __global const float* P, float* C) {{\n"
+            f"    switch (func) {{\n{axis}    }}\n}}\n")
+
+
 def _split_dispatch(functions: list[ParametricFunction], optimize: bool) -> str:
     """pl_split(func) (SPLIT_NONE / SPLIT_U / SPLIT_V), pl_surface_axis and pl_surface_rest; the
     same for the position-only code (pl_position_split, pl_position_axis, pl_position_rest); and
@@ -576,25 +586,16 @@ def _split_dispatch(functions: list[ParametricFunction], optimize: bool) -> str:
     splits = [surface_split(f) if optimize else None for f in functions]
     psplits = [position_split(f) if optimize else None for f in functions]
     floats = max([1] + [len(s.carried) for s in splits + psplits if s])
-    pkinds = "".join(f"        case {i}: return {s.axis}u;\n" for i, s in enumerate(psplits) if s)
-    paxis = "".join(f"        case {i}: pl_paxis_{i}(a, P, C); return;\n" for i, s in enumerate(psplits) if s)
-    prest = "".join(f"        case {i}: return pl_prest_{i}(u, v, P, C);\n" if s else
-                    f"        case {i}: return pl_pos_{i}(u, v, P);\n" for i, s in enumerate(psplits))
-    position = ("inline uint pl_position_split(uint func) {\n"
-                f"    switch (func) {{\n{pkinds}    }}\n    return 0u;\n}}\n"
-                "inline void pl_position_axis(uint func, float a, __global const float* P, float* C) {\n"
-                f"    switch (func) {{\n{paxis}    }}\n}}\n"
-                "inline float3 pl_position_rest(uint func, float u, float v, __global const float* P, const float* C) {\n"
-                f"    switch (func) {{\n{prest}    }}\n    return (float3)(NAN, NAN, NAN);\n}}\n")
-    kinds = "".join(f"        case {i}: return {s.axis}u;\n" for i, s in enumerate(splits) if s)
-    axis = "".join(f"        case {i}: pl_axis_{i}(a, P, C); return;\n" for i, s in enumerate(splits) if s)
     rest = "".join(f"        case {i}: pl_rest_{i}(u, v, P, C, pos, du, dv); return;\n" if s else
                    f"        case {i}: pl_surf_{i}(u, v, P, pos, du, dv); return;\n" for i, s in enumerate(splits))
+    prest = "".join(f"        case {i}: return pl_prest_{i}(u, v, P, C);\n" if s else
+                    f"        case {i}: return pl_pos_{i}(u, v, P);\n" for i, s in enumerate(psplits))
     return (f"#define PL_SPLIT_U {SPLIT_U}u\n#define PL_SPLIT_V {SPLIT_V}u\n#define PL_SPLIT_FLOATS {floats}\n"
-            f"inline uint pl_split(uint func) {{\n    switch (func) {{\n{kinds}    }}\n    return 0u;\n}}\n"
-            "inline void pl_surface_axis(uint func, float a, __global const float* P, float* C) {\n"
-            f"    switch (func) {{\n{axis}    }}\n}}\n"
-            "inline void pl_surface_rest(uint func, float u, float v, __global const float* P, const float* C,"
+            + _axis_dispatch(splits, "pl_split", "pl_surface_axis", "pl_axis")
+            + "inline void pl_surface_rest(uint func, float u, float v, __global const float* P, const float* C,"
             " float3* pos, float3* du, float3* dv) {\n"
             f"    switch (func) {{\n{rest}    }}\n"
-            "    *pos = *du = *dv = (float3)(NAN, NAN, NAN);\n}\n" + position)
+            "    *pos = *du = *dv = (float3)(NAN, NAN, NAN);\n}\n"
+            + _axis_dispatch(psplits, "pl_position_split", "pl_position_axis", "pl_paxis")
+            + "inline float3 pl_position_rest(uint func, float u, float v, __global const float* P, const float* C) {\n"
+            f"    switch (func) {{\n{prest}    }}\n    return (float3)(NAN, NAN, NAN);\n}}\n")

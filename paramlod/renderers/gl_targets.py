@@ -107,6 +107,7 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
         # counter buffer the resolve reports the device's sample count into)
         common = [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
         prog = programs[key] = _full_screen_program(ctx, defs, common, "tess_resolve_fragment", "resolve")
+        set_uniform(prog, "u_srgb8_buckets", RESOLVE_TABLE_UNIT)   # the texture is bound to it per resolve
     return prog
 
 
@@ -236,7 +237,6 @@ class _Outputs:
         prog = self.resolve_vao.program
         set_uniform(prog, "u_background", self.out.background)
         srgb8_buckets_texture(self.ctx).use(location=RESOLVE_TABLE_UNIT)
-        set_uniform(prog, "u_srgb8_buckets", RESOLVE_TABLE_UNIT)
         return prog
 
     def frame(self) -> Frame:

@@ -4,6 +4,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import paramlod as pl
+from paramlod.function.codegen_cl import SPLIT_U, position_split
+from paramlod.lod import stage as stage_module
 from paramlod.lod.reference import lod_step, run_lod
 from paramlod.lod.patches import FLAG_FORCED, EVAL_DTYPE, sort_key
 from paramlod.core.layouts import camera_record
@@ -54,9 +56,6 @@ def test_runs_of_split_samples_give_the_same_render_list(monkeypatch):
     # on CPU devices a work-item evaluates a run of samples, the steps of the position split's
     # parameter once for those sharing it (kernels/lod/lod.cl lod_order): fibre and glyph split
     # along u, the sphere not at all; the render list is the one of one sample at a time, bit for bit
-    from paramlod.function.codegen_cl import SPLIT_U, position_split
-    from paramlod.lod import stage as stage_module
-
     scene = pl.Scene()
     scene.add("fiber", transform=pl.scale(0.2))
     scene.add("sh_glyph", transform=pl.translate(1.5, 0, 0) @ pl.scale(0.5))

@@ -241,21 +241,19 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
                                                   tuple(t.ss for t in POINT_TIERS) if rs.points.hybrid else
                                                   (rs.points.supersample,)),
         "host_rss_mib": _rss_mib(),
+        # pixel statistics and read-back time of the extra frame read back
+        "pixels_written": pixels["pixels_written"], "overdraw": pixels.get("overdraw", 0.0),
+        "readback_ms": pixels["readback_ms"], "image_readback_ms": pixels["image_readback_ms"],
     }
     if variant == "tess":
         out["cl_gl_transfer_ms"] = med(s["ms"].get("render_list", 0.0) for s in st)
         out["aa_effective"] = st[0].get("aa_effective")
         out["triangles"] = med(s.get("triangles", 0) for s in st)
         out["host_ms"] = None   # GL work is not timed by OpenCL events
-        out.update(pixels_written=pixels["pixels_written"], overdraw=pixels.get("overdraw", 0.0),
-                   readback_ms=pixels["readback_ms"], image_readback_ms=pixels["image_readback_ms"])
     else:
         # host: Python time preparing and enqueueing the frame (it overlaps the device's work);
         # idle: the part of the frame not covered by OpenCL kernels (launch gaps, waits, transfers)
         out["host_ms"] = med(s["ms"]["host"] for s in st)
-        # pixel statistics and read-back time of the extra frame read back
-        out.update(pixels_written=pixels["pixels_written"], overdraw=pixels["overdraw"],
-                   readback_ms=pixels["readback_ms"], image_readback_ms=pixels["image_readback_ms"])
         # samples evaluated per pixel of the frame that shows something (issue #22's measure of waste)
         out["samples_per_pixel"] = out["samples"] / max(pixels["pixels_written"], 1)
         culled = [s["occlusion"] for s in st if "occlusion" in s]   # "auto" culls some frames
