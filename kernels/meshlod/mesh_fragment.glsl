@@ -1,8 +1,8 @@
 // Fragment stage of the meshlets-gl draw: the shared shading model (common/shading.cl, two-sided
 // Blinn-Phong in view space, the tess renderer's body) of the interpolated vertex normal turned
-// to face the viewer, into the four attachments of paramlod.renderers.gl_targets:
-//   0 colour RGBA16F (linear RGB, alpha 1), 1 linear view depth R32F,
-//   2 world-space normal facing the viewer RGBA16F, 3 object id R32UI.
+// to face the viewer, into the attachments of paramlod.renderers.gl_targets (common/targets.glsl):
+//   0 colour (linear RGB, alpha 1), 1 linear view depth, 2 world-space normal facing the viewer,
+//   3 object id, and into targets drawn directly (noAA, u_image 1) 4 the 8-bit sRGB image.
 // PL_COLOR_BY (MeshDraw.draw's color_by): 0 the material's colour; 1 a colour per cluster, 2 a
 // colour per LOD level (common/debug_color.cl, which the host puts before this file for 1 and 2),
 // shaded like a material of that colour.
@@ -28,6 +28,7 @@ flat in uint ms_view_index;   // the view (layer) the geometry stage drew the tr
 
 #include "common/targets.glsl"
 
+uniform int u_image;    // 1: the targets are drawn directly (noAA) and take the image from here
 uniform vec4 u_light;   // the light record: towards the light in view space (xyz), ambient share (w)
 uniform int u_rows;     // the target's height in pixels (subsamples with SSAA), for rows from the top
 
@@ -53,8 +54,10 @@ void main() {
     vec3 base = ms_material.xyz;
 #endif
     vec3 rgb = pl_shade_rgb(n, ev, base, ms_material.w, u_light.xyz, u_light.w);
-    out_color = vec4(clamp(rgb, 0.0, 1.0), 1.0);
+    rgb = clamp(rgb, 0.0, 1.0);
+    out_color = vec4(rgb, 1.0);
     out_depth = -ms_view.z;
     out_normal = vec4(transpose(mat3(PL_VIEW_MATRIX)) * n, 0.0);
     out_object = ms_object;
+    if (u_image != 0) out_image = srgb8_image(rgb);   // alpha 1: the host's composite is rgb itself
 }

@@ -54,21 +54,11 @@ uniform sampler2D u_color;
 
 #include "common/targets.glsl"
 
-// The 8-bit sRGB image over u_background that Frame.rgb8 returns (RGBA8UI, alpha 255), so that a
-// frame asked only for its image reads 4 bytes a pixel. Bit for bit the host's
-// linear_to_srgb8(rgb * a + background * (1 - a)) of out_color: the composite in float32 as
-// numpy computes it (precise: no fused multiply-add), and the code from the encoder's table of
-// 1/PL_SRGB8_BUCKETS buckets (paramlod.core.color.linear_to_srgb8_buckets: the code of a bucket's
-// start and the one threshold inside it), not the shader's pow, whose rounding differs from numpy's.
-layout(location = 4) out uvec4 out_image;
+// The 8-bit sRGB image over u_background that Frame.rgb8 returns (alpha 255), so that a frame
+// asked only for its image reads 4 bytes a pixel. Bit for bit the host's
+// linear_to_srgb8(rgb * a + background * (1 - a)) of out_color: the composite in float32 as numpy
+// computes it (precise: no fused multiply-add), the code from srgb8_code (common/targets.glsl).
 uniform vec3 u_background;
-uniform sampler2D u_srgb8_buckets;   // RG32F, PL_SRGB8_BUCKETS x 1
-
-uint srgb8_code(float x) {
-    x = clamp(x, 0.0, 1.0);
-    vec2 b = texelFetch(u_srgb8_buckets, ivec2(min(int(x * float(PL_SRGB8_BUCKETS)), PL_SRGB8_BUCKETS - 1), 0), 0).rg;
-    return uint(b.x) + (x >= b.y ? 1u : 0u);
-}
 
 void main() {
     ivec2 p = ivec2(gl_FragCoord.xy);
@@ -97,10 +87,14 @@ void main() {
     precise vec4 straight = c.a > 0.0 ? vec4(c.rgb / c.a, c.a) : vec4(0.0);
     out_color = straight;
     out_depth = best;
-    float ln = length(n);
+#ifdef PL_HALF_NORMALS
+    float ln = length(n);   // stored in half floats: no longer of unit length
     out_normal = vec4(ln > 0.0 ? n / ln : vec3(0.0), 0.0);
+#else
+    out_normal = vec4(n, 0.0);   // float32, as the fragment wrote it (as targets drawn directly keep it)
+#endif
     out_object = id;
     precise vec3 over = straight.rgb * straight.a + u_background * (1.0 - straight.a);
-    out_image = uvec4(srgb8_code(over.r), srgb8_code(over.g), srgb8_code(over.b), 255u);
+    out_image = srgb8_image(over);
     if (!isinf(best)) atomicAdd(pl_pixels_written, 1u);
 }

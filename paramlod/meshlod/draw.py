@@ -341,7 +341,7 @@ class MeshDraw:
         set_uniform(prog, "u_view", gl_matrix(camera.view))
         set_uniform(prog, "u_proj", gl_matrix(camera.projection))
         self._bind(prog, light, int(h * eff.ss))
-        tg.begin()
+        tg.begin(prog)
         n = len(sel)
         triangles = 0
         if n:
@@ -396,7 +396,7 @@ class MeshDraw:
         self._bind(prog, light, int(h * eff.ss))
         set_uniform(prog, "u_n_views", n_views)
         self._views.bind_to_uniform_block(0)
-        tg.begin()
+        tg.begin(prog)
         n = len(sel)
         triangles = 0
         if n:

@@ -8,13 +8,20 @@ frame: ``targets_for`` (make or reuse targets for (size, supersampling, multisam
 and ``GLTargets.frame`` (a Frame read back lazily; ``read`` copies every array at once). The
 OpenCL renderers' counterpart is ``paramlod.renderers.targets``.
 
-Targets, at the supersampled size, multisampled or not: colour RGBA16F (linear RGB, alpha 1 where
-drawn), linear view depth R32F, world normal RGBA16F, object id R32UI, a depth renderbuffer. A
-fragment shader writes them at locations 0-3. The resolve (kernels/tess/tess_resolve_*.glsl, with
-the prelude and tess_common.glsl for its counter buffer): the hardware multisample resolve of the
-colour, box-averaged over the SSAA block (straight alpha = covered fraction); depth, normal and id of
-the nearest covered sample of the block, +inf / 0 / 0 where none is; the 8-bit sRGB image over the
-background, the host's encoding bit for bit; the pixels written, counted.
+Targets, at the supersampled size, multisampled or not: colour (linear RGB, alpha 1 where drawn),
+linear view depth R32F, world normal, object id R32UI, a depth renderbuffer; colour and normal in
+half floats where a pixel has several samples (``half_floats``), float32 otherwise. A fragment
+shader writes them at locations 0-3 (kernels/common/targets.glsl). The resolve
+(kernels/tess/tess_resolve_*.glsl, with the prelude and tess_common.glsl for its counter buffer):
+the hardware multisample resolve of the colour, box-averaged over the SSAA block (straight alpha =
+covered fraction); depth, normal and id of the nearest covered sample of the block, +inf / 0 / 0
+where none is; the 8-bit sRGB image over the background, the host's encoding bit for bit; the
+pixels written, counted.
+
+noAA targets of one view (``GLTargets.direct``) have no draw targets of their own: the fragments
+write an output set, the image (location 4) included, and the background pass
+(kernels/tess/tess_background_fragment.glsl) fills the pixels nothing was drawn into and counts
+them, in place of the resolve.
 
 Hybrid anti-aliasing (the tess renderer's ``aa = "hybrid"``): each tier draws into its own
 targets, coarse to fine; a finer tier's targets start from a per-sample copy of a coarser tier's
@@ -37,7 +44,7 @@ import moderngl
 import numpy as np
 
 from paramlod import kernels
-from paramlod.core.color import SRGB8_BUCKETS, linear_to_srgb8_buckets
+from paramlod.core.color import linear_to_srgb8, linear_to_srgb8_buckets
 from paramlod.core.frame import Frame
 from paramlod.core.layouts import glsl_prelude
 from paramlod.device.context import gl_cache
@@ -91,35 +98,56 @@ def _full_screen_program(ctx, defs: dict, common: list[str], fragment: str, what
                           f"{context_lines(stages[stage], log, GLSL_LINE)}\ncompiler said:\n{log[-2000:]}") from None
 
 
-def resolve_program(ctx, ss: int, samples: int, layered: bool = False):
+def half_floats(ss: int, samples: int, depth_texture: bool = False) -> bool:
+    """Whether draw targets keep colour and normal in half floats: where a pixel has several
+    samples (memory: 4xSS+8xMS at 1080p holds 265 M samples), and in hybrid tiers (carried into
+    such targets). Targets of one sample a pixel keep float32, as the output sets do, so that a
+    view of a multi-view frame equals the single-view frame drawn directly bit for bit."""
+    return ss * max(samples, 1) > 1 or depth_texture
+
+
+def resolve_program(ctx, ss: int, samples: int, layered: bool = False, half: bool = True):
     """The resolve program for ``ss`` x ``ss`` supersampling and ``samples`` multisamples (of one
-    layer ``u_layer`` of texture arrays when ``layered``), cached."""
+    layer ``u_layer`` of texture arrays when ``layered``) of targets with half-float normals
+    (``half``: renormalized) or float32 ones (copied), cached."""
     programs = gl_cache(ctx).setdefault("gl_resolve_programs", {})
-    key = (ss, samples) if not layered else (ss, samples, "layered")
+    key = (ss, samples, layered, half)
     prog = programs.get(key)
     if prog is None:
-        defs = {"PL_SS": ss, "PL_SAMPLES": samples, "PL_SRGB8_BUCKETS": SRGB8_BUCKETS}
+        defs = {"PL_SS": ss, "PL_SAMPLES": samples}
         if samples > 1:
             defs["PL_MS"] = 1
         if layered:
             defs["PL_LAYERED"] = 1
+        if half:
+            defs["PL_HALF_NORMALS"] = 1
         # the very text the tess renderer compiled before the move (tess_common.glsl declares the
         # counter buffer the resolve reports the device's sample count into)
         common = [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
         prog = programs[key] = _full_screen_program(ctx, defs, common, "tess_resolve_fragment", "resolve")
-        set_uniform(prog, "u_srgb8_buckets", RESOLVE_TABLE_UNIT)   # the texture is bound to it per resolve
     return prog
 
 
-def srgb8_buckets_texture(ctx):
-    """The resolve's sRGB encoding table (paramlod.core.color.linear_to_srgb8_buckets) as an
-    RG32F texture, cached."""
+def background_program(ctx):
+    """The background pass of targets drawn directly (kernels/tess/tess_background_fragment.glsl),
+    cached."""
     cache = gl_cache(ctx)
-    tex = cache.get("srgb8_buckets")
-    if tex is None:
-        tex = cache["srgb8_buckets"] = ctx.texture((SRGB8_BUCKETS, 1), 2, linear_to_srgb8_buckets().tobytes(), dtype="f4")
-        tex.filter = (ctx.NEAREST, ctx.NEAREST)
-    return tex
+    prog = cache.get("gl_background_program")
+    if prog is None:
+        common = [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
+        prog = cache["gl_background_program"] = _full_screen_program(ctx, {"PL_FAR": 1}, common,
+                                                                     "tess_background_fragment", "background")
+    return prog
+
+
+def bind_srgb8_buckets(ctx):
+    """Bind the image's sRGB encoding table (paramlod.core.color.linear_to_srgb8_buckets; cached,
+    a storage buffer) to its binding, SRGB8_TABLE_BINDING (common/targets.glsl)."""
+    cache = gl_cache(ctx)
+    buf = cache.get("srgb8_buckets")
+    if buf is None:
+        buf = cache["srgb8_buckets"] = ctx.buffer(linear_to_srgb8_buckets().tobytes())
+    buf.bind_to_storage_buffer(SRGB8_TABLE_BINDING)
 
 
 def carry_vao(ctx, ratio: int, coarse_samples: int):
@@ -134,26 +162,27 @@ def carry_vao(ctx, ratio: int, coarse_samples: int):
     return vao
 
 
-RESOLVE_TABLE_UNIT = 5   # the resolve's texture units: 0-4 the targets, 5 the sRGB table
+SRGB8_TABLE_BINDING = 5   # the storage buffer binding of the image's encoding table (common/targets.glsl)
 LENT_SETS = 3   # output sets that lent Frames may hold at once before the oldest is copied to the host
 
 
 class _OutputSet:
     """One set of single-sampled output targets at ``size``: colour RGBA32F, depth R32F, normal
-    RGBA32F, object id R32UI and the 8-bit sRGB image RGBA8UI (attachments 0-4 of ``fbo``)."""
+    RGBA32F, object id R32UI and the 8-bit sRGB image RGBA8UI (attachments 0-4 of ``fbo``, with
+    the depth buffer ``zbuf`` where the set is drawn into directly)."""
 
     ARRAYS = {"color": ("color", np.float32, 4), "depth": ("depth", np.float32, 1),
               "normal": ("normal", np.float32, 3), "object_id": ("object", np.uint32, 1),
               "image": ("image", np.uint8, 3)}
 
-    def __init__(self, ctx, size):
+    def __init__(self, ctx, size, zbuf=None):
         self.ctx, self.size = ctx, tuple(size)
         self.color = ctx.texture(size, 4, dtype="f4")
         self.depth = ctx.texture(size, 1, dtype="f4")
         self.normal = ctx.texture(size, 4, dtype="f4")
         self.object = ctx.texture(size, 1, dtype="u4")
         self.image = ctx.texture(size, 4, dtype="u1")
-        self.fbo = ctx.framebuffer([self.color, self.depth, self.normal, self.object, self.image])
+        self.fbo = ctx.framebuffer([self.color, self.depth, self.normal, self.object, self.image], zbuf)
         self.background = (0.0, 0.0, 0.0)   # what the last resolve's image is composited over
 
     def read(self, name: str) -> np.ndarray:
@@ -209,8 +238,11 @@ class _Outputs:
             raise exc
         raise DeviceError(f"could not create the {what}: {exc}") from None
 
-    def _outputs(self, prog):
-        self.out = _OutputSet(self.ctx, self.size)   # the set the next resolve draws into
+    def _outputs(self, prog, zbuf=None):
+        """The output sets (each with ``zbuf`` where drawn into directly) and the pass of ``prog``
+        that ends a frame: the resolve, or the background pass of targets drawn directly."""
+        self._set_zbuf = zbuf
+        self.out = _OutputSet(self.ctx, self.size, zbuf)   # the set the next resolve draws into
         self._free: list[_OutputSet] = []            # sets no Frame holds
         # id(set) -> (the set, a weak reference to the Frame that holds it, its finalizer), oldest first
         self._lent: dict[int, tuple] = {}
@@ -220,23 +252,27 @@ class _Outputs:
         self.resolve_vao = self.ctx.vertex_array(prog, [])
         self.pixels_written = 0
 
-    def _bind_resolve(self, background):
-        """Bind the output set this resolve draws into (one no Frame holds), its counters, zeroed,
-        and the background its image is composited over; returns the resolve program."""
+    def _next_set(self) -> _OutputSet:
+        """The output set the next frame goes into (``out``): one no Frame holds."""
         if id(self.out) in self._lent:
             if self._free:
                 self.out = self._free.pop()
             elif len(self._lent) < LENT_SETS:
-                self.out = _OutputSet(self.ctx, self.size)
+                self.out = _OutputSet(self.ctx, self.size, self._set_zbuf)
             else:   # the oldest lent Frame copies its arrays to the host and gives its set back
                 self.out = self._take_back(next(iter(self._lent)), self._lent)
-        self.out.fbo.use()
+        return self.out
+
+    def _bind_resolve(self, background):
+        """Bind the output set this resolve draws into (one no Frame holds), its counters, zeroed,
+        and the background its image is composited over; returns the resolve program."""
+        self._next_set().fbo.use()
         self.out.background = tuple(float(x) for x in background)
         self.samples_buffer.write(bytes(16))
         self.samples_buffer.bind_to_storage_buffer(4)
         prog = self.resolve_vao.program
         set_uniform(prog, "u_background", self.out.background)
-        srgb8_buckets_texture(self.ctx).use(location=RESOLVE_TABLE_UNIT)
+        bind_srgb8_buckets(self.ctx)
         return prog
 
     def frame(self) -> Frame:
@@ -281,7 +317,12 @@ class GLTargets(_Outputs):
     """Render targets at the supersampled size (multisampled when ``samples`` > 1) and the
     single-sampled output targets at ``size``; ``what`` names the renderer in errors.
     ``depth_texture``: the depth buffer is a depth texture, so that ``carry`` can read it (a
-    renderbuffer otherwise)."""
+    renderbuffer otherwise).
+
+    ``direct`` (one sample a pixel, no depth texture): the fragments draw straight into an output
+    set, the image included (the draw program's ``u_image``, set by ``begin``), and the resolve
+    is the background pass: no full-screen pass reads the targets (on llvmpipe at 640x640 the
+    resolve took 9-10 ms of a 20-25 ms frame)."""
 
     layers = 0   # not layered (LayeredGLTargets)
 
@@ -289,14 +330,24 @@ class GLTargets(_Outputs):
                  depth_texture: bool = False):
         self.ctx = ctx
         self.size, self.ss, self.samples, self.depth_texture = tuple(size), ss, samples, depth_texture
+        self.direct = ss == 1 and samples <= 1 and not depth_texture
         w, h = size
         big = (w * ss, h * ss)
         ms = samples if samples > 1 else 0
         self._check_size()
+        if self.direct:
+            try:
+                self.zbuf = ctx.depth_renderbuffer(big)
+                self.background_query = ctx.query(samples=True)
+                self._outputs(background_program(ctx), self.zbuf)
+            except Exception as exc:
+                self._failed(exc, f"{what} render targets ({w}x{h})")
+            return
         try:
-            self.color = ctx.texture(big, 4, dtype="f2", samples=ms)
+            half = half_floats(ss, samples, depth_texture)
+            self.color = ctx.texture(big, 4, dtype="f2" if half else "f4", samples=ms)
             self.depth = ctx.texture(big, 1, dtype="f4", samples=ms)
-            self.normal = ctx.texture(big, 4, dtype="f2", samples=ms)
+            self.normal = ctx.texture(big, 4, dtype="f2" if half else "f4", samples=ms)
             self.object = ctx.texture(big, 1, dtype="u4", samples=ms)
             if depth_texture:
                 self.zbuf = ctx.depth_texture(big, samples=ms)
@@ -317,12 +368,28 @@ class GLTargets(_Outputs):
                 single.append(self.zbuf)
             for t in single:
                 t.filter = (ctx.NEAREST, ctx.NEAREST)
-            self._outputs(resolve_program(ctx, ss, samples))
+            self._outputs(resolve_program(ctx, ss, samples, half=half))
         except Exception as exc:
             self._failed(exc, f"{what} render targets ({w}x{h}, {ss}x{ss} SS, {samples} samples)")
 
-    def begin(self):
-        """Bind the targets for drawing and clear them (colour and depth only; see CLEAR_MASK)."""
+    def begin(self, program=None):
+        """Bind the targets for drawing and clear them (colour and depth only; see CLEAR_MASK;
+        targets drawn directly: an output set no Frame holds, its depth buffer only, the
+        background pass fills the rest). ``program``, the draw program, is told whether to
+        write the image (its ``u_image``): direct targets need it."""
+        if self.direct:
+            if program is None:
+                raise ValueError("targets drawn directly need the draw program, which writes their image")
+            fbo = self._next_set().fbo
+            fbo.use()
+            fbo.color_mask = ((False,) * 4,) * 5
+            fbo.clear(depth=1.0)
+            fbo.color_mask = ((True,) * 4,) * 5
+            bind_srgb8_buckets(self.ctx)
+            set_uniform(program, "u_image", 1)
+            return
+        if program is not None:
+            set_uniform(program, "u_image", 0)
         self.fbo.use()
         self.fbo.color_mask = CLEAR_MASK
         self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -358,6 +425,8 @@ class GLTargets(_Outputs):
         ``background``; returns the samples per pixel the device really allocated (llvmpipe gives
         4 for a 2xMS request) and sets ``pixels_written``."""
         ctx = self.ctx
+        if self.direct:
+            return self._fill_background(background)
         if self.samples > 1:
             ctx.copy_framebuffer(self.color_resolved_fbo, self.color_ms_fbo)
         ctx.disable(moderngl.DEPTH_TEST)
@@ -373,13 +442,31 @@ class GLTargets(_Outputs):
         self.pixels_written = int(counters[2])
         return int(counters[1])
 
+    def _fill_background(self, background) -> int:
+        """``resolve`` of targets drawn directly: the background pass (its occlusion query counts
+        the pixels nothing was drawn into) over the current output set."""
+        ctx, out = self.ctx, self.out
+        out.background = tuple(float(x) for x in background)
+        prog = self.resolve_vao.program
+        set_uniform(prog, "u_background_code", tuple(int(c) for c in linear_to_srgb8(np.float32(out.background))))
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        ctx.depth_func = "<="   # the far plane passes where the cleared depth (1) is left
+        with self.background_query:
+            self.resolve_vao.render(mode=moderngl.TRIANGLES, vertices=3)
+        ctx.depth_func = "<"
+        w, h = self.size
+        self.pixels_written = w * h - int(self.background_query.samples)   # waits for the pass
+        return 1
+
     def release(self):
-        self._release("fbo", "color_ms_fbo", "color_resolved_fbo", "color", "depth", "normal", "object", "zbuf")
+        self._release("fbo", "color_ms_fbo", "color_resolved_fbo", "color", "depth", "normal", "object", "zbuf",
+                      "background_query")
 
 
 # --- layered targets (multi-view frames) --------------------------------------------------------
 GL_TEXTURE_2D_ARRAY, GL_TEXTURE_2D_MULTISAMPLE_ARRAY = 0x8C1A, 0x9102
-GL_RGBA16F, GL_R32F, GL_R32UI, GL_DEPTH_COMPONENT24 = 0x881A, 0x822E, 0x8236, 0x81A6
+GL_RGBA16F, GL_RGBA32F, GL_R32F, GL_R32UI, GL_DEPTH_COMPONENT24 = 0x881A, 0x8814, 0x822E, 0x8236, 0x81A6
 GL_TEXTURE_MIN_FILTER, GL_TEXTURE_MAG_FILTER, GL_NEAREST = 0x2801, 0x2800, 0x2600
 GL_FRAMEBUFFER, GL_FRAMEBUFFER_COMPLETE = 0x8D40, 0x8CD5
 GL_COLOR_ATTACHMENT0, GL_DEPTH_ATTACHMENT = 0x8CE0, 0x8D00
@@ -466,8 +553,10 @@ class LayeredGLTargets(_Outputs):
         try:
             while gl.glGetError():   # errors left by others are not ours
                 pass
+            half = half_floats(ss, samples)
+            rgba = GL_RGBA16F if half else GL_RGBA32F
             self.color, self.depth, self.normal, self.object, self.zbuf = (
-                self._array(f) for f in (GL_RGBA16F, GL_R32F, GL_RGBA16F, GL_R32UI, GL_DEPTH_COMPONENT24))
+                self._array(f) for f in (rgba, GL_R32F, rgba, GL_R32UI, GL_DEPTH_COMPONENT24))
             draw = [self.color, self.depth, self.normal, self.object]
             self.fbo = self._framebuffer(draw, self.zbuf)
             if samples > 1:
@@ -478,7 +567,7 @@ class LayeredGLTargets(_Outputs):
                 self.layer_fbo = self._framebuffer([], None)
                 self.resolved_fbo = self._framebuffer([], None)
                 gl.glNamedFramebufferTexture(self.resolved_fbo, GL_COLOR_ATTACHMENT0, self.color_resolved.glo, 0)
-            self._outputs(resolve_program(ctx, ss, samples, layered=True))
+            self._outputs(resolve_program(ctx, ss, samples, layered=True, half=half))
             err = gl.glGetError()
             if err:
                 raise DeviceError(f"could not create the {what} render targets ({w}x{h}, {ss}x{ss} SS, {samples} "
@@ -520,10 +609,12 @@ class LayeredGLTargets(_Outputs):
                               f"targets of {self.samples} samples: framebuffer status 0x{status:04x}")
         return fbo
 
-    def begin(self):
+    def begin(self, program=None):
         """Bind the layered targets for drawing (outside moderngl, which keeps its own binding
         and restores it at its next framebuffer call) and clear every layer's colour and depth
-        (see CLEAR_MASK)."""
+        (see CLEAR_MASK); ``program``, the draw program, is told not to write the image."""
+        if program is not None:
+            set_uniform(program, "u_image", 0)
         gl, (bw, bh) = self.gl, self.big
         gl.glBindFramebuffer(GL_FRAMEBUFFER, self.fbo)
         gl.glViewport(0, 0, bw, bh)

@@ -67,7 +67,7 @@ from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import AAMode, lod_divisor, parse_aa  # noqa: F401  (AAMode, lod_divisor re-exported)
 from paramlod.renderers.aa import hybrid_tiers, tier_divisors
 from paramlod.renderers.gl_targets import (GL_MAX_GEOMETRY_SHADER_INVOCATIONS, GLTargets, GrowBuffer, LayeredGLTargets,
-                                           effective_aa, gl_limit, gl_matrix, max_samples, resolve_program, targets_for)
+                                           effective_aa, gl_limit, gl_matrix, max_samples, targets_for)
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.shading import LIGHT
 from paramlod.renderers.tess_grid import GridTessellator
@@ -593,7 +593,6 @@ class TessRenderer:
         t0 = time.perf_counter()
         grid = self.tessellator(settings) == "grid"
         prog = build_programs(ctx, self.functions, settings.spacing, grid=grid)
-        resolve_program(ctx, aa.ss, aa.msaa)   # compiled with the setup (targets_for reuses it)
         w, h = camera.size
         tg = self._targets_for((w, h), aa.ss, aa.msaa)
         # detail_levels: the patches the spot check sent on, drawn last with their finer thresholds
@@ -611,7 +610,7 @@ class TessRenderer:
         set_uniform(prog, "u_near", float(camera.near))
         self._set_uniforms(prog, settings, (w, h), (tu, tv))
 
-        tg.begin()
+        tg.begin(prog)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         queries, draw_calls, start = [], 0, 0
@@ -688,7 +687,7 @@ class TessRenderer:
         for k in drawn:
             tg = targets[k]
             if coarse is None:
-                tg.begin()
+                tg.begin(prog)
             elif tg is not coarse:
                 ta = time.perf_counter()
                 tg.carry(coarse)
@@ -760,7 +759,6 @@ class TessRenderer:
             return self._views_one_by_one(checked, scene, views, view_masks)
         t0 = time.perf_counter()
         prog = build_programs(ctx, self.functions, settings.spacing, invocations)
-        resolve_program(ctx, aa.ss, aa.msaa, layered=True)
         w, h = views.size
         tg = self._layered_for((w, h), aa.ss, aa.msaa, n_views)
         t1 = time.perf_counter()
@@ -774,7 +772,7 @@ class TessRenderer:
         t2 = time.perf_counter()
 
         self._set_uniforms(prog, settings, (w, h), (tu, tv))
-        tg.begin()
+        tg.begin(prog)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         set_uniform(prog, "u_n_views", n_views)

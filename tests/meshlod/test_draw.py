@@ -239,14 +239,19 @@ def test_empty_selection_gives_the_background(one):
     assert f.stats["triangles"] == 0 and f.stats["draw_calls"] == 0 and f.stats["pixels_written"] == 0
 
 
-def test_nothing_of_the_previous_frame_shows(mesh, one):
-    one.draw(everything(mesh), CAM, aa="4xMS")
-    small = one.draw(np.array([[0, 2]], np.uint32), CAM, aa="4xMS")
+@pytest.mark.parametrize("aa", ["4xMS", "noAA"])
+def test_nothing_of_the_previous_frame_shows(mesh, one, aa):
+    """noAA draws straight into an output set that the dropped first frame held: the background
+    pass must clear what it drew."""
+    one.draw(everything(mesh), CAM, aa=aa, background=(0.2, 0.3, 0.4))
+    small = one.draw(np.array([[0, 2]], np.uint32), CAM, aa=aa, background=(0.2, 0.3, 0.4))
     fresh = drawer([MeshObject(mesh, np.eye(4), Material(color=(0.7, 0.5, 0.3), specular=0.0), 1)])
-    alone = fresh.draw(np.array([[0, 2]], np.uint32), CAM, aa="4xMS")
+    alone = fresh.draw(np.array([[0, 2]], np.uint32), CAM, aa=aa, background=(0.2, 0.3, 0.4))
     assert 0 < np.isfinite(alone.depth).sum() < 0.2 * np.isfinite(sphere_disc(CAM)[0]).sum()
-    np.testing.assert_array_equal(small.depth, alone.depth)
-    np.testing.assert_array_equal(small.object_id, alone.object_id)
+    np.testing.assert_array_equal(small.rgb8(), alone.rgb8())
+    for name in ("depth", "object_id", "color", "normal"):
+        np.testing.assert_array_equal(getattr(small, name), getattr(alone, name), err_msg=name)
+    assert small.stats["pixels_written"] == np.isfinite(alone.depth).sum()
 
 
 def test_instances_with_their_own_transforms(mesh):

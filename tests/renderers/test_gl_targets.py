@@ -126,3 +126,27 @@ def test_a_frame_outlives_its_targets():
     _tess(scene, small.with_size((56, 40)))
     assert frame.on_device == ()
     np.testing.assert_array_equal(frame.rgb8(), _tess(scene, small).rgb8())
+
+
+def test_a_set_drawn_into_again_keeps_nothing_of_its_last_frame():
+    """noAA frames are drawn straight into an output set (GLTargets.direct), whose background pass
+    fills what no fragment wrote: after a near frame is dropped, a far frame drawn into its set
+    equals one drawn into a fresh set, and its bare pixels hold the background only."""
+    scene = _scene()
+    near = pl.Camera.look_at((0, 1, 2.2), (0, 0, 0), size=(48, 40))
+    far = pl.Camera.look_at((0, 2, 6), (0, 0, 0), size=(48, 40))
+    frame = _tess(scene, near)
+    held, written = frame._source, frame.stats["pixels_written"]
+    del frame
+    gc.collect()
+    again = _tess(scene, far)
+    assert again._source is held and again.stats["pixels_written"] < written
+    fresh = _tess(scene, far)   # `again` holds the reused set: this one draws into another
+    assert fresh._source is not held
+    np.testing.assert_array_equal(again.rgb8(), fresh.rgb8())
+    for name in ("color", "depth", "normal", "object_id"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(fresh, name), err_msg=name)
+    bare = ~np.isfinite(again.depth)
+    assert bare.sum() > 1000 and again.stats["pixels_written"] == (~bare).sum()
+    assert not again.color[bare].any() and not again.normal[bare].any() and not again.object_id[bare].any()
+    assert np.all(again.rgb8()[bare] == linear_to_srgb8(np.float32(scene.background)))
