@@ -340,7 +340,7 @@ inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* 
 // work-item in row order, evaluated whole (pl_surface): runs were slower on the H200 where
 // placing and testing the samples, not evaluating them, bounds the frame (docs/points.md).
 typedef struct { uint split, na, nb, runs, len; } Runs;
-#ifndef PL_RUN   // set by the host per device (paramlod/renderers/points.py RUN_GPU, RUN_CPU)
+#ifndef PL_RUN   // set by the host per device (paramlod/function/programs.py sample_run)
 #define PL_RUN 8u
 #endif
 

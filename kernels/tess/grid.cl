@@ -149,7 +149,7 @@ inline int grid_visit(int8 L, int l, bool columns) {
     return columns && l < inner ? (l % rows) * (L.s4 - 1) + l / rows : l;
 }
 
-#ifndef PL_RUN   // set by the host per device (paramlod/renderers/tess_grid.py RUN_GPU, RUN_CPU)
+#ifndef PL_RUN   // set by the host per device (paramlod/function/programs.py sample_run)
 #define PL_RUN 1u
 #endif
 

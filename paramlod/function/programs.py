@@ -7,6 +7,15 @@ from paramlod.device import programs
 from paramlod.function.codegen_cl import cl_dispatch_source
 
 POLY_TRIG = "PL_POLY_TRIG"   # a define: the generated code's sin, cos and sincos inline (kernels/common/poly_trig.cl)
+# samples (or grid vertices) a work-item visits down a grid line of a split function, the split's
+# steps evaluated once a run (the point sampler's PL_RUN, the grid tessellator's): runs on CPU
+# devices; one on GPUs, whose frames runs made slower (docs/points.md, "The surface split")
+RUN_GPU, RUN_CPU = 1, 16
+
+
+def sample_run(is_gpu: bool) -> int:
+    """RUN_GPU or RUN_CPU for a device."""
+    return RUN_GPU if is_gpu else RUN_CPU
 
 
 def _generated(functions) -> tuple[str, str]:

@@ -17,12 +17,9 @@ from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
-from paramlod.function.programs import POLY_TRIG, build
+from paramlod.function.programs import POLY_TRIG, build, sample_run
 
 LOCAL_SIZE = 64
-# samples a work-item takes down a grid line of a split function (points.cl patch_runs): the steps
-# of the split's axis are evaluated once per run
-RUN_GPU, RUN_CPU = 1, 16
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
 # occlusion = "auto": culling is used while it saves at least this share of a frame's samples
 # (measured on the H200, docs/points.md: culling that removed 6 % of the samples cost 7 % of the
@@ -77,7 +74,7 @@ class DirectPointRenderer:
             defines["PL_GROUP_COUNTERS"] = 1
         else:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
             defines[POLY_TRIG] = 1
-        defines["PL_RUN"] = RUN_GPU if cl_device().is_gpu else RUN_CPU
+        defines["PL_RUN"] = sample_run(cl_device().is_gpu)   # points.cl patch_runs
         # occlusion.cl shares the program: the function code is compiled once
         self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions, defines)
         # own kernel objects per list drawn in a frame (all patches, the two occlusion phases, the

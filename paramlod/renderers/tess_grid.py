@@ -24,7 +24,7 @@ from paramlod.core.layouts import GRID_VERTEX
 from paramlod.device.context import cl_device
 from paramlod.device.programs import launch
 from paramlod.errors import SceneError
-from paramlod.function.programs import POLY_TRIG, build
+from paramlod.function.programs import POLY_TRIG, build, sample_run
 from paramlod.lod.patches import RENDER_DTYPE
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.shading import LIGHT
@@ -35,10 +35,6 @@ VERTICES, TRIANGLES = LEVELS.index("vertices"), LEVELS.index("triangles")
 # most vertices one list may make (32 bytes each: 2 GiB); more is an error that names the way out
 MAX_VERTICES = 1 << 26
 LOCAL_SIZE = 64
-# vertices a work-item of grid_vertices visits: runs down a grid row or column share the steps
-# of a surface split on CPU devices; GPUs keep one vertex a work-item (as the point renderer's
-# RUN_GPU / RUN_CPU, paramlod/renderers/points.py)
-RUN_GPU, RUN_CPU = 1, 16
 
 
 @dataclass
@@ -76,7 +72,7 @@ class GridTessellator:
     def __init__(self, functions):
         dev = cl_device()
         # on a CPU device the function code gets inline sin/cos, as the point renderer's does
-        self.run = RUN_GPU if dev.is_gpu else RUN_CPU
+        self.run = sample_run(dev.is_gpu)   # grid_vertices visits down a grid row or column
         defines = {"PL_RUN": self.run}
         if not dev.is_gpu:
             defines[POLY_TRIG] = 1

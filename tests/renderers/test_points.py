@@ -9,9 +9,9 @@ import sympy as sp
 import paramlod as pl
 from paramlod.core.layouts import cl_prelude
 from paramlod.device.context import cl_device
+from paramlod.function import programs as function_programs
 from paramlod.function.codegen_cl import SPLIT_NONE, SPLIT_U, SPLIT_V, surface_split
 from paramlod.scene.framing import framing_camera
-from paramlod.renderers import points as points_module
 from paramlod.renderers.points import DirectPointRenderer, grid_counts
 from paramlod.renderers.targets import KeyBuffer
 
@@ -50,7 +50,7 @@ def test_runs_of_split_functions_visit_every_sample_once(monkeypatch):
     cam = framing_camera(scene, size=(120, 72))
     colors = []
     for run in (1, 3, 16):
-        monkeypatch.setattr(points_module, "RUN_CPU", run)
+        monkeypatch.setattr(function_programs, "RUN_CPU", run)
         colors.append(check_every_sample_once(*record_direct_points(pl.PointSettings(coverage="pixel"), cam.size,
                                                                     scene, cam)))
     for color in colors[1:]:

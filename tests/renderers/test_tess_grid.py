@@ -14,6 +14,7 @@ from paramlod.renderers.tess import Tessellation, TessSettings
 from paramlod.renderers.tess_grid import GridTessellator
 from paramlod.renderers.tess_grid_reference import grid_levels, grid_topology
 from paramlod.core.layouts import GRID_VERTEX
+from paramlod.function import programs as function_programs
 from paramlod.function.codegen_cl import SPLIT_U, SPLIT_V, surface_split
 from paramlod.scene.framing import framing_camera
 
@@ -87,7 +88,7 @@ def test_runs_of_split_functions_give_the_vertices_bit_for_bit(monkeypatch):
     settings = TessSettings(mode="chord", chord_px=0.25, l_min=1.0)
     grids = []
     for run in (1, 3, 16):
-        monkeypatch.setattr(tess_grid, "RUN_CPU", run)
+        monkeypatch.setattr(function_programs, "RUN_CPU", run)
         grid = GridTessellator(scene.functions()).tessellate(records, scene, cam, settings, (12.0, 12.0))
         grids.append(grid.vertices.view(np.uint8))
     assert len(records) > 100 and len(grids[0]) > 3000 * GRID_VERTEX.dtype.itemsize

@@ -28,9 +28,9 @@ import pyopencl.array as cla
 from paramlod.device import programs
 from paramlod.device.context import cl_device
 from paramlod.function.codegen_cl import SPLIT_V, cl_dispatch_source, cl_function_source, surface_split
+from paramlod.function.programs import sample_run
 from paramlod.function.registry import all_functions
 from paramlod.functions.sh_glyph import make_sh_glyph
-from paramlod.renderers.points import RUN_CPU, RUN_GPU
 
 SH_ORDERS = (2, 4, 6, 8, 10, 12)
 NORMAL_FLOPS = 9          # cross(du, dv): 6 mul + 3 sub
@@ -250,7 +250,7 @@ def function_throughput(nu=2048, nv=1024, before: bool = False, names=None, repe
             sp_surf = _time(ks, q, nu, nv, fn, params, out_buf, repeats)
             if opt:   # the surface split in runs, as the point renderer on this device takes them
                 kx = programs.kernel("eval_split_throughput", ["common/eval.cl"], generated=src, describe=fn.name)
-                run = RUN_GPU if cl_device().is_gpu else RUN_CPU
+                run = sample_run(cl_device().is_gpu)
                 row.update({"split_axis": "none" if surface_split(fn) is None else "uv"[surface_split(fn).axis - 1],
                             "split_run": run,
                             "split_samples_per_s": _time_split(kx, q, nu, nv, fn, params, out_buf, repeats, run),
