@@ -12,7 +12,7 @@ layout(location = 4) out uvec4 out_image;
 // The image's code of a linear value, bit for bit the host's linear_to_srgb8: from the encoder's
 // table (paramlod.core.color.linear_to_srgb8_buckets, a vec2 per bucket of [0, 1]: the code of
 // the bucket's start and the one threshold inside it), not the shader's pow, whose rounding
-// differs from numpy's. A storage buffer: on llvmpipe its loads cost a third of a texel fetch.
+// differs from numpy's. A storage buffer: on llvmpipe a load is cheaper than a texel fetch.
 layout(std430, binding = 5) readonly buffer PlSrgb8Buckets { vec2 pl_srgb8_buckets[]; };
 
 uint srgb8_code(float x) {
