@@ -562,7 +562,8 @@ class TessRenderer:
         written, resolve ms); a line in ``notes`` when the device allocated other than ``msaa``
         samples."""
         t0 = time.perf_counter()
-        # hardware multisample resolve of the colour, then the SSAA block in a shader
+        # the hardware multisample resolve, then the SSAA block in a shader (targets drawn directly:
+        # the background pass)
         device_samples = tg.resolve(scene.background)
         t1 = time.perf_counter()
         if device_samples != msaa:
