@@ -169,13 +169,16 @@ __kernel void grid_vertices(__global const RenderPatch* patches, uint count, __g
     uint carried_patch = 0xffffffffu;   // C holds the split's steps at carried_at for this patch
     float carried_at = 0.0f;
 #endif
+    uint lo = 0;   // the patch p with vert_start[p] <= g < vert_start[p + 1]
     for (uint r = 0; r < PL_RUN; ++r) {
         uint g = get_global_id(0) * PL_RUN + r;
         if (g >= vert_start[count]) return;
-        uint lo = 0, hi = count;   // the patch p with vert_start[p] <= g < vert_start[p + 1]
-        while (hi - lo > 1u) {
-            uint mid = (lo + hi) >> 1;
-            if (vert_start[mid] <= g) lo = mid; else hi = mid;
+        if (r == 0u || g >= vert_start[lo + 1u]) {   // searched again only where a run enters the next patch
+            uint hi = count;
+            while (hi - lo > 1u) {
+                uint mid = (lo + hi) >> 1;
+                if (vert_start[mid] <= g) lo = mid; else hi = mid;
+            }
         }
         RenderPatch rp = patches[lo];
         __global const float* I = inst_f + rp.inst * INST_F;

@@ -248,9 +248,9 @@ class _Outputs:
         self._free: list[_OutputSet] = []            # sets no Frame holds
         # id(set) -> (the set, a weak reference to the Frame that holds it, its finalizer), oldest first
         self._lent: dict[int, tuple] = {}
-        # the resolve's counters (tess_common.glsl PlCounters): [1] the device's samples per pixel,
-        # [2] the pixels written
-        self.samples_buffer = self.ctx.buffer(reserve=16)
+        if zbuf is None:   # the resolve's counters (tess_common.glsl PlCounters): [1] the device's
+            # samples per pixel, [2] the pixels written (targets drawn directly count with a query)
+            self.samples_buffer = self.ctx.buffer(reserve=16)
         self.resolve_vao = self.ctx.vertex_array(prog, [])
         self.pixels_written = 0
 

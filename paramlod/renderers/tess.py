@@ -791,20 +791,18 @@ class TessRenderer:
         frames, per_view = [], []
         for v in range(n_views):
             t4 = time.perf_counter()
-            tg.resolve(v)
-            if v == 0:
-                device_samples = tg.device_samples()
-                if device_samples != aa.msaa:
-                    notes.append(f"the device allocated {device_samples} samples per pixel for a {aa.msaa}-sample "
-                                 "request; coverage and the depth/id resolve use all of them")
+            tg.resolve(v, scene.background)
+            device_samples = tg.device_samples()   # waits; the layer's pixels written, counted by the resolve
+            if v == 0 and device_samples != aa.msaa:
+                notes.append(f"the device allocated {device_samples} samples per pixel for a {aa.msaa}-sample "
+                             "request; coverage and the depth/id resolve use all of them")
             t5 = time.perf_counter()
             color, depth, normal, ids = tg.read()
             frame = Frame(color=color, depth=depth, normal=normal, object_id=ids)
             frame.background = scene.background
-            written = int(np.count_nonzero(np.isfinite(depth)))
-            t6 = time.perf_counter()   # readback, as draw's: to host arrays, and the pixels counted
+            t6 = time.perf_counter()   # readback, as draw's: to host arrays
             frames.append(frame)
-            per_view.append({"view": v, "pixels_written": written,
+            per_view.append({"view": v, "pixels_written": tg.pixels_written,
                              "view_ms": {"resolve": (t5 - t4) * 1e3, "readback": (t6 - t5) * 1e3}})
         t7 = time.perf_counter()
         ms = {"setup": (t1 - t0) * 1e3, "render_list_upload": (t2 - t1) * 1e3, "draw": (t3 - t2) * 1e3,
