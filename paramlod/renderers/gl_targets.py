@@ -164,6 +164,10 @@ def carry_vao(ctx, ratio: int, coarse_samples: int):
 
 SRGB8_TABLE_BINDING = 5   # the storage buffer binding of the image's encoding table (common/targets.glsl)
 LENT_SETS = 3   # output sets that lent Frames may hold at once before the oldest is copied to the host
+# the resolve's counter buffer (tess_common.glsl PlCounters): NaN vertices, device samples, then
+# the pixels written in PL_PIXEL_SLOTS counters
+PIXEL_SLOTS = 256
+RESOLVE_COUNTERS_BYTES = 4 * (2 + PIXEL_SLOTS)
 
 
 class _OutputSet:
@@ -249,10 +253,16 @@ class _Outputs:
         # id(set) -> (the set, a weak reference to the Frame that holds it, its finalizer), oldest first
         self._lent: dict[int, tuple] = {}
         if zbuf is None:   # the resolve's counters (tess_common.glsl PlCounters): [1] the device's
-            # samples per pixel, [2] the pixels written (targets drawn directly count with a query)
-            self.samples_buffer = self.ctx.buffer(reserve=16)
+            # samples per pixel, [2:] the pixels written (targets drawn directly count with a query)
+            self.samples_buffer = self.ctx.buffer(reserve=RESOLVE_COUNTERS_BYTES)
         self.resolve_vao = self.ctx.vertex_array(prog, [])
         self.pixels_written = 0
+
+    def _read_counters(self) -> int:
+        """The device's samples per pixel from the resolve's counters; sets ``pixels_written``."""
+        counters = np.frombuffer(self.samples_buffer.read(RESOLVE_COUNTERS_BYTES), np.uint32)
+        self.pixels_written = int(counters[2:].sum(dtype=np.int64))
+        return int(counters[1])
 
     def _next_set(self) -> _OutputSet:
         """The output set the next frame goes into (``out``): one no Frame holds."""
@@ -270,7 +280,7 @@ class _Outputs:
         and the background its image is composited over; returns the resolve program."""
         self._next_set().fbo.use()
         self.out.background = tuple(float(x) for x in background)
-        self.samples_buffer.write(bytes(16))
+        self.samples_buffer.write(bytes(RESOLVE_COUNTERS_BYTES))
         self.samples_buffer.bind_to_storage_buffer(4)
         prog = self.resolve_vao.program
         set_uniform(prog, "u_background", self.out.background)
@@ -440,9 +450,7 @@ class GLTargets(_Outputs):
             set_uniform(prog, name, unit)
         self.resolve_vao.render(mode=moderngl.TRIANGLES, vertices=3)
         ctx.finish()
-        counters = np.frombuffer(self.samples_buffer.read(16), np.uint32)
-        self.pixels_written = int(counters[2])
-        return int(counters[1])
+        return self._read_counters()
 
     def _fill_background(self, background) -> int:
         """``resolve`` of targets drawn directly: the background pass (its occlusion query counts
@@ -649,9 +657,7 @@ class LayeredGLTargets(_Outputs):
         """The samples per pixel the device really allocated, as the last resolve saw (waits);
         sets ``pixels_written`` of that layer."""
         self.ctx.finish()   # the resolve's storage write, visible to the read
-        counters = np.frombuffer(self.samples_buffer.read(16), np.uint32)
-        self.pixels_written = int(counters[2])
-        return int(counters[1])
+        return self._read_counters()
 
     def release(self):
         self._release()
