@@ -17,9 +17,8 @@ layout(std430, binding = 2) readonly buffer PlInstU { uint pl_inst_u[]; };     /
 layout(std430, binding = 3) readonly buffer PlMaterials { vec4 pl_materials[]; };  // material record: rgb, specular
 // Counters read back into Frame.stats: NaN vertices (evaluation stage), the device's real sample
 // count per pixel of the multisampled targets and the pixels written (resolve pass), the last in
-// PL_PIXEL_SLOTS counters the host sums (pixel (x, y) adds to slot x % 16 + 16 (y % 16)): one
-// counter for every pixel of a 1080p frame cost an NVIDIA H100 30 ms of contended atomics.
-#define PL_PIXEL_SLOTS 256
+// 256 counters the host sums (pixel (x, y) adds to slot x % 16 + 16 (y % 16); gl_targets.PIXEL_SLOTS):
+// one counter for every pixel of a 1080p frame cost an NVIDIA H100 30 ms of contended atomics.
 layout(std430, binding = 4) buffer PlCounters { uint pl_nan_vertices; uint pl_device_samples; uint pl_pixels_written[]; };
 
 uniform mat4 u_view;        // world -> view

@@ -165,7 +165,7 @@ def carry_vao(ctx, ratio: int, coarse_samples: int):
 SRGB8_TABLE_BINDING = 5   # the storage buffer binding of the image's encoding table (common/targets.glsl)
 LENT_SETS = 3   # output sets that lent Frames may hold at once before the oldest is copied to the host
 # the resolve's counter buffer (tess_common.glsl PlCounters): NaN vertices, device samples, then
-# the pixels written in PL_PIXEL_SLOTS counters
+# the pixels written in PIXEL_SLOTS counters (tess_resolve_fragment.glsl's slot of a pixel)
 PIXEL_SLOTS = 256
 RESOLVE_COUNTERS_BYTES = 4 * (2 + PIXEL_SLOTS)
 
