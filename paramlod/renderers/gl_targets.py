@@ -98,6 +98,12 @@ def _full_screen_program(ctx, defs: dict, common: list[str], fragment: str, what
                           f"{context_lines(stages[stage], log, GLSL_LINE)}\ncompiler said:\n{log[-2000:]}") from None
 
 
+def _pass_common() -> list[str]:
+    """What the resolve and background passes put before their file: the prelude and
+    tess_common.glsl (PL_INF, and the counter buffer the resolve reports into)."""
+    return [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
+
+
 def half_floats(ss: int, samples: int, depth_texture: bool = False) -> bool:
     """Whether draw targets keep colour and normal in half floats: where a pixel has several
     samples (memory: 4xSS+8xMS at 1080p holds 265 M samples), and in hybrid tiers (carried into
@@ -121,10 +127,7 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False, half: boo
             defs["PL_LAYERED"] = 1
         if half:
             defs["PL_HALF_NORMALS"] = 1
-        # the very text the tess renderer compiled before the move (tess_common.glsl declares the
-        # counter buffer the resolve reports the device's sample count into)
-        common = [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
-        prog = programs[key] = _full_screen_program(ctx, defs, common, "tess_resolve_fragment", "resolve")
+        prog = programs[key] = _full_screen_program(ctx, defs, _pass_common(), "tess_resolve_fragment", "resolve")
     return prog
 
 
@@ -134,8 +137,7 @@ def background_program(ctx):
     cache = gl_cache(ctx)
     prog = cache.get("gl_background_program")
     if prog is None:
-        common = [glsl_prelude(), kernels.source("tess/tess_common.glsl")]
-        prog = cache["gl_background_program"] = _full_screen_program(ctx, {"PL_FAR": 1}, common,
+        prog = cache["gl_background_program"] = _full_screen_program(ctx, {"PL_FAR": 1}, _pass_common(),
                                                                      "tess_background_fragment", "background")
     return prog
 
