@@ -11,7 +11,7 @@ from sympy import cos, pi, sin
 from paramlod import parametric
 
 
-@parametric(u=(0, 1), v=(0, 2 * pi), params={"radius": 0.5, "height": 1.0})
+@parametric(u=(0, 1), v=(0, 2 * pi), params={"radius": 0.5, "height": 1.0}, periodic="v")
 def cone(u, v, radius, height):
     """Cone, base circle at z = 0, tip at z = height; u base->tip, v around; radius (0.5), height (1)."""
     r = radius * (1 - u)

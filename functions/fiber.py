@@ -51,7 +51,7 @@ def fiber_center(s, a, h, d, r, omega, phi):
     return eta, deta, w
 
 
-@parametric(u=(0, 2 * pi), v=(0, 2 * pi), params=dict(FIBER))
+@parametric(u=(0, 2 * pi), v=(0, 2 * pi), params=dict(FIBER), periodic="v")
 def fiber(u, v, a, h, d, r, omega, phi, radius):
     """Crane's fibre around the yarn, one loop: u along, v around; a, h, d, r, omega, phi, radius."""
     eta, deta, w = fiber_center(u, a, h, d, r, omega, phi)

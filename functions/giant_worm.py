@@ -64,7 +64,7 @@ def _parts() -> list[Part]:
 
 
 @parametric(u=(0, 1), v=(0, 2 * pi), params={"thickness": 0.35, "offset": 0.5, "sway": 0.8, "bumps": 0.05},
-            parts=_parts())
+            parts=_parts(), periodic="v")
 def giant_worm(u, v, t, thickness, offset, sway, bumps):
     """Giant worm body (jaws, tongue and 57 teeth as parts): u mouth->tail, v around; t, thickness, offset, sway, bumps."""
     pts = control_points(t, sway)

@@ -68,7 +68,8 @@ def giant_worm_jaw_inner(u, v, t, length, width, bend, curl, open_deg, thickness
     return jaw_point(u, v, t, length, width, bend, curl, open_deg, inset=thickness)
 
 
-@parametric(u=(0, pi), v=(0, 2 * pi), params={"length": 1.4, "width": 0.35, "wiggle": 0.25})
+@parametric(u=(0, pi), v=(0, 2 * pi), params={"length": 1.4, "width": 0.35, "wiggle": 0.25},
+            periodic="v")
 def giant_worm_tongue(u, v, t, length, width, wiggle):
     """Giant worm tongue: a stretched, flattened, wiggling sphere; u base->tip, v around; t, length, width, wiggle."""
     along = let((1 - cos(u)) / 2, "along")                 # 0 at the base, 1 at the tip

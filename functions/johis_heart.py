@@ -29,7 +29,7 @@ def heart_shape(u, v):
     return 0.9 * x, y, 0.4 * z
 
 
-@parametric(u=(0, pi), v=(0, 2 * pi), params={"size": 1.0})
+@parametric(u=(0, pi), v=(0, 2 * pi), params={"size": 1.0}, periodic="v")
 def johis_heart(u, v, size):
     """Johi's heart (thesis Listing 5.1, base sphere read as (sin u sin v, cos u, sin u cos v)); size (1)."""
     x, y, z = heart_shape(u, v)

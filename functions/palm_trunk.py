@@ -31,7 +31,7 @@ def sawtooth(x, drop):
 
 @parametric(u=(0, 1), v=(0, 2 * pi),
             params={"control": CONTROL, "radius_base": 0.35, "radius_top": 0.22, "rings": 22.0,
-                    "ring_depth": 0.18, "drop": 0.12})
+                    "ring_depth": 0.18, "drop": 0.12}, periodic="v")
 def palm_trunk(u, v, control, radius_base, radius_top, rings, ring_depth, drop):
     """Palm trunk: Bezier pipe with a sawtooth ring profile; control points, radii, rings, ring_depth, drop."""
     pts = [vec3(*control[3 * i:3 * i + 3]) for i in range(4)]

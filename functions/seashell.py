@@ -89,7 +89,8 @@ def shell(theta, v, alpha, beta, a, b, mu, nod_width_e, nod_count_e, nod_count_s
 
 
 def make_seashell(name: str, preset: tuple):
-    @parametric(u=(0, 2 * COILS * pi), v=(0, 2 * pi), params=dict(zip(PARAMS, preset)), name=name)
+    @parametric(u=(0, 2 * COILS * pi), v=(0, 2 * pi), params=dict(zip(PARAMS, preset)), name=name,
+                periodic="v")
     def seashell(u, v, alpha, beta, a, b, mu, nod_width_e, nod_count_e, nod_count_s, nod_height,
                  spiky_e, spiky_s):
         """Seashell after Wilson: u = theta in [0, 16pi] apex->mouth, v around; spiral, ellipse, nodules."""

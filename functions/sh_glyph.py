@@ -104,7 +104,8 @@ def make_sh_glyph(order: int = 12, basis: str = "descoteaux07", name: str | None
     check_basis(basis)
     fname = name or f"sh_glyph_o{order}_{basis}"
 
-    @parametric(u=(0, sp.pi), v=(0, 2 * sp.pi), params={"coeffs": default_coefficients(order)}, name=fname)
+    @parametric(u=(0, sp.pi), v=(0, 2 * sp.pi), params={"coeffs": default_coefficients(order)}, name=fname,
+                periodic="v")
     def glyph(u, v, coeffs):
         """SH glyph: signed radius r(theta=u, phi=v) from even-band real SH coefficients."""
         r = sh_radius(coeffs, u, v, order, basis)

@@ -9,7 +9,7 @@ from sympy import cos, pi, sin
 from paramlod import parametric
 
 
-@parametric(u=(0, pi), v=(0, 2 * pi), params={"radius": 1.0})
+@parametric(u=(0, pi), v=(0, 2 * pi), params={"radius": 1.0}, periodic="v")
 def sphere(u, v, radius):
     """Sphere, u = polar angle from +z in [0, pi], v = azimuth from +x in [0, 2pi); radius (1)."""
     return radius * sin(u) * cos(v), radius * sin(u) * sin(v), radius * cos(u)

@@ -20,7 +20,7 @@ from .johis_heart import heart_shape
 
 
 @parametric(u=(0, pi), v=(0, 2 * pi),
-            params={"size": 1.0, "spikes_u": 10.0, "spikes_v": 20.0, "height": 0.3, "sharpness": 5.0})
+            params={"size": 1.0, "spikes_u": 10.0, "spikes_v": 20.0, "height": 0.3, "sharpness": 5.0}, periodic="v")
 def spiky_heart(u, v, size, spikes_u, spikes_v, height, sharpness):
     """Johi's heart with smooth spikes on its middle band; size, spikes_u, spikes_v, height, sharpness."""
     x, y, z = heart_shape(u, v)

@@ -10,7 +10,7 @@ from sympy import cos, pi, sin
 from paramlod import parametric
 
 
-@parametric(u=(0, 2 * pi), v=(0, 2 * pi), params={"major": 1.0, "minor": 0.35})
+@parametric(u=(0, 2 * pi), v=(0, 2 * pi), params={"major": 1.0, "minor": 0.35}, periodic="uv")
 def torus(u, v, major, minor):
     """Torus around z; u around the axis, v around the tube; major (1) and minor (0.35) radii."""
     ring = major + minor * cos(v)

@@ -42,7 +42,7 @@ def yarn_frame(s, a, h, d):
     return g, e1, e2, e3, g1, g2
 
 
-@parametric(u=(0, 2 * pi), v=(0, 2 * pi), params=dict(CRANE))
+@parametric(u=(0, 2 * pi), v=(0, 2 * pi), params=dict(CRANE), periodic="v")
 def yarn(u, v, a, h, d, radius):
     """Crane's plain-knit yarn, one loop: u along the loop in [0, 2pi], v around; a, h, d, radius."""
     g, _, e2, e3, _, _ = yarn_frame(u, a, h, d)

@@ -5,7 +5,7 @@ from hypothesis import settings
 
 import paramlod as pl
 from paramlod.device.context import cl_device
-from paramlod.renderers.points import DirectPointRenderer, grid_counts
+from paramlod.renderers.points import DirectPointRenderer, grid_counts, patch_wraps
 from paramlod.renderers.targets import KeyBuffer
 from paramlod.scene import loaders
 
@@ -68,7 +68,8 @@ def record_direct_points(settings, size, scene=None, cam=None):
     r = renderer_for(scene)
     dev = r.upload(scene, cam)
     rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings())
-    nu, nv = grid_counts(r.lod.read_render_list(n), settings)
+    rl = r.lod.read_render_list(n)
+    nu, nv = grid_counts(rl, settings, wraps=patch_wraps(rl, dev["flags"], dev["domains"]))
     counts = nu * nv
     total = int(counts.sum())
     q = cl_device().queue

@@ -47,14 +47,18 @@ inline float2 patch_measure(RenderPatch rp, uint measure) {
 // LOD lines could not see the speed the edge has, is stepped for w (na steps each), the five
 // sevenths between for s (nm steps): n = 2 na + nm + 1. Raising only the strips costs about 2/7 of
 // what raising the whole grid to w would.
+// wrap (a uniform grid along an axis over which the function repeats, spanned whole; `wraps` from
+// patch_wraps): its last sample is a copy of its first and is not drawn (n - wrap samples drawn;
+// the steps stay those of n).
 typedef struct {
-    uint n, na, nm;
+    uint n, na, nm, wrap;
 } GridAxis;
 
-inline GridAxis grid_axis(float s, float w, uint boundary, float factor, uint max_side) {
+inline GridAxis grid_axis(float s, float w, uint boundary, uint wraps, float factor, uint max_side) {
     GridAxis a;
     a.na = 0u; a.nm = 0u;
     a.n = side_count(w, factor, max_side);
+    a.wrap = wraps;
     if (!boundary || !(w > s) || a.n >= max_side) return a;
     float fa = w * factor;
     fa = fa * (1.0f / 7.0f);
@@ -63,26 +67,38 @@ inline GridAxis grid_axis(float s, float w, uint boundary, float factor, uint ma
     float na = fmax(ceil(fa), 1.0f), nm = fmax(ceil(fm), 1.0f);
     float n = 2.0f * na + nm + 1.0f;
     if (!(n < (float)max_side) || n >= (float)a.n) return a;   // no cheaper than uniform: uniform
-    a.na = (uint)na; a.nm = (uint)nm; a.n = (uint)n;
+    a.na = (uint)na; a.nm = (uint)nm; a.n = (uint)n; a.wrap = 0u;
     return a;
 }
 
+// (u, v): whether the patch spans its instance's domain along an axis over which the function
+// repeats (INST_WRAP_U / INST_WRAP_V, set from the function's `periodic`)
+inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
+    uint wu = (flags & INST_WRAP_U) != 0u && rp.range.x == I[INST_DOMAIN + 0] && rp.range.y == I[INST_DOMAIN + 1];
+    uint wv = (flags & INST_WRAP_V) != 0u && rp.range.z == I[INST_DOMAIN + 2] && rp.range.w == I[INST_DOMAIN + 3];
+    return (uint2)(wu, wv);
+}
+
 // The sampling grid of one patch: nu x nv samples spanning the range widened by `widen` per
-// side (so neighbouring patches overlap and leave no seam), clamped to the function's domain.
+// side (so neighbouring patches overlap and leave no seam), clamped to the function's domain,
+// less the repeated last line of a wrapping axis (grid_axis).
 typedef struct {
     float u0, v0, su, sv;   // first sample and (middle) steps
-    uint nu, nv;
+    uint nu, nv;            // samples drawn per direction
     float u1, v1, au, av;   // last sample, strip steps (boundary strips only)
     uint nau, nav;          // strip steps per end; 0: uniform
+    uint capped;            // a direction has max_side samples
 } PointGrid;
 
-inline PointGrid point_grid(RenderPatch rp, __global const float* I, float factor, uint measure,
+inline PointGrid point_grid(RenderPatch rp, __global const float* I, uint flags, float factor, uint measure,
                             float widen, uint max_side) {
     PointGrid g;
     float2 m = patch_measure(rp, measure);
-    GridAxis gu = grid_axis(rp.ext.z, m.x, measure == 2u, factor, max_side);
-    GridAxis gv = grid_axis(rp.ext.w, m.y, measure == 2u, factor, max_side);
-    g.nu = gu.n; g.nv = gv.n; g.nau = gu.na; g.nav = gv.na;
+    uint2 wraps = patch_wraps(rp, I, flags);
+    GridAxis gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, factor, max_side);
+    GridAxis gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, factor, max_side);
+    g.nu = gu.n - gu.wrap; g.nv = gv.n - gv.wrap; g.nau = gu.na; g.nav = gv.na;
+    g.capped = gu.n == max_side || gv.n == max_side;
     float4 r = sampled_range(rp.range, I, widen);
     float u0 = r.x, u1 = r.y, v0 = r.z, v1 = r.w;
     g.u0 = u0; g.v0 = v0; g.u1 = u1; g.v1 = v1;
@@ -92,7 +108,7 @@ inline PointGrid point_grid(RenderPatch rp, __global const float* I, float facto
         g.su = ((u1 - u0) - 2.0f * l) / (float)gu.nm;
     } else {
         g.au = 0.0f;
-        g.su = (u1 - u0) / (float)(g.nu - 1);
+        g.su = (u1 - u0) / (float)(gu.n - 1);
     }
     if (gv.na) {
         float l = (v1 - v0) * (1.0f / 7.0f);
@@ -100,7 +116,7 @@ inline PointGrid point_grid(RenderPatch rp, __global const float* I, float facto
         g.sv = ((v1 - v0) - 2.0f * l) / (float)gv.nm;
     } else {
         g.av = 0.0f;
-        g.sv = (v1 - v0) / (float)(g.nv - 1);
+        g.sv = (v1 - v0) / (float)(gv.n - 1);
     }
     return g;
 }
@@ -354,10 +370,13 @@ inline Runs patch_runs(uint split, uint nu, uint nv) {
     return r;
 }
 
-inline uint patch_chunks(RenderPatch rp, uint split, float factor, uint measure, uint max_side) {
+inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
+                         uint measure, uint max_side) {
     float2 m = patch_measure(rp, measure);
-    uint nu = grid_axis(rp.ext.z, m.x, measure == 2u, factor, max_side).n;
-    uint nv = grid_axis(rp.ext.w, m.y, measure == 2u, factor, max_side).n;
+    uint2 wraps = patch_wraps(rp, I, flags);
+    GridAxis gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, factor, max_side);
+    GridAxis gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, factor, max_side);
+    uint nu = gu.n - gu.wrap, nv = gv.n - gv.wrap;
     Runs r = patch_runs(split, nu, nv);
     return (r.na * r.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
 }
@@ -368,7 +387,8 @@ inline uint patch_chunks(RenderPatch rp, uint split, float factor, uint measure,
 // are listed (ALL_TIERS: every patch).
 #define ALL_TIERS 0xFFFFFFFFu
 __kernel void points_schedule(__global const RenderPatch* patches, __global const uint* count,
-                              uint count_at, uint capacity, __global const uint* inst_u, float factor,
+                              uint count_at, uint capacity, __global const float* inst_f,
+                              __global const uint* inst_u, float factor,
                               uint measure, uint max_side, uint tier, __global ulong* order,
                               __global ulong* counters)
 {
@@ -376,8 +396,9 @@ __kernel void points_schedule(__global const RenderPatch* patches, __global cons
     for (uint pid = get_global_id(0); pid < n_patches; pid += get_global_size(0)) {
         RenderPatch rp = patches[pid];
         if (tier != ALL_TIERS && ((rp.flags >> TIER_SHIFT) & 3u) != tier) continue;
-        uint split = pl_split(inst_u[rp.inst * INST_U + INST_FUNC]);
-        ulong k = patch_chunks(rp, split, factor, measure, max_side);
+        __global const uint* U = inst_u + rp.inst * INST_U;
+        ulong k = patch_chunks(rp, inst_f + rp.inst * INST_F, U[INST_FLAGS], pl_split(U[INST_FUNC]), factor,
+                               measure, max_side);
         ulong old = atom_add(&counters[SCHED_AT], (1ul << CHUNK_BITS) | k);
         order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
     }
@@ -427,11 +448,11 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
             __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
             uint object_id = inst_u[inst * INST_U + INST_OBJECT];
             float4 mat = debug_material(materials[inst], rp, color_by);
-            PointGrid g = point_grid(rp, I, factor, measure, widen, max_side);
+            PointGrid g = point_grid(rp, I, inst_u[inst * INST_U + INST_FLAGS], factor, measure, widen, max_side);
             // the views that see the patch (the LOD stage's render_views): the others are skipped
             ulong seen = n_views == 1u ? 1ul : view_masks[pid];
             Runs runs = patch_runs(pl_split(func), g.nu, g.nv);
-            if (c == first && get_local_id(0) == 0 && (g.nu == max_side || g.nv == max_side)) n_capped++;
+            if (c == first && get_local_id(0) == 0 && g.capped) n_capped++;
             for (; c < min(next, c_end); ++c) {
                 uint unit = (c - first) * POINTS_LOCAL + get_local_id(0);   // the patch's run
                 if (unit >= runs.na * runs.runs) continue;   // the patch's last chunk is partly empty

@@ -143,14 +143,15 @@ void points_lfb(__global const RenderPatch* patches, __global const int4* rects,
         for (uint i = lid; i < m; i += PL_LOCAL) {
             uint pid = pairs[off + c0 + i];
             RenderPatch rp = patches[pid];
-            PointGrid g = point_grid(rp, inst_f + rp.inst * INST_F, factor, measure, widen, max_side);
+            PointGrid g = point_grid(rp, inst_f + rp.inst * INST_F, inst_u[rp.inst * INST_U + INST_FLAGS], factor,
+                                     measure, widen, max_side);
             int4 r = rects[pid];
             cg[i] = g; cpid[i] = pid; cinst[i] = rp.inst;
             cfirst[i] = (r.x == tx && r.y == ty) ? 1u : 0u;  // per-patch statistics counted once
             cstart[i + 1] = g.nu * g.nv;
             if (cfirst[i]) {
                 n_unique += g.nu * g.nv;
-                if (g.nu == max_side || g.nv == max_side) n_capped++;
+                if (g.capped) n_capped++;
             }
         }
         barrier(CLK_LOCAL_MEM_FENCE);

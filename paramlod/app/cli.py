@@ -120,8 +120,9 @@ def cmd_functions(args) -> int:
         params = ", ".join(
             f"{p.name}={float(p.default):g}" if not p.is_array else f"{p.name}=[{p.size} values]"
             for p in fn.params) or "-"
+        periodic = f" periodic {''.join(fn.periodic)}" if fn.periodic else ""
         print(f"{name:20s} u=[{fn.u_range[0]:.4g}, {fn.u_range[1]:.4g}] v=[{fn.v_range[0]:.4g}, {fn.v_range[1]:.4g}]"
-              f"  params: {params}  ({fn.source})")
+              f"{periodic}  params: {params}  ({fn.source})")
         if fn.summary:   # the first line of its docstring (docs/writing-plugins.md promises it)
             print(f"{'':20s} {fn.summary}")
     return 0

@@ -171,9 +171,12 @@ INSTANCE_U = Record(
         Field("func", UINT, 1, "index of the function in the scene's function list"),
         Field("params", UINT, 1, "offset of its parameter block in the params buffer"),
         Field("object", UINT, 1, "object id (1-based)"),
-        Field("flags", UINT, 1, "bit 0 (INST_ONE_SIDED): one-sided, its back faces may be culled"),
+        Field("flags", UINT, 1, "bit 0 (INST_ONE_SIDED): one-sided, its back faces may be culled; bits 1, 2 "
+              "(INST_WRAP_U, INST_WRAP_V): the function repeats across the domain in u, v"),
     ], prefix="INST", size="INST_U",
-    constants=[Constant("INST_ONE_SIDED", 1, True, "InstanceU.flags: a one-sided material on a smooth function")])
+    constants=[Constant("INST_ONE_SIDED", 1, True, "InstanceU.flags: a one-sided material on a smooth function"),
+               Constant("INST_WRAP_U", 2, True, "InstanceU.flags: f(u0, v) = f(u1, v) (a periodic u)"),
+               Constant("INST_WRAP_V", 4, True, "InstanceU.flags: f(u, v0) = f(u, v1) (a periodic v)")])
 
 MATERIAL = Record(
     "material", "per instance, Scene.materials() (float4 / vec4 per instance)", [

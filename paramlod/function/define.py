@@ -131,6 +131,9 @@ class ParametricFunction:
     python_function: Callable | None = field(default=None, repr=False)
     line: int = 0
     parts: tuple[Part, ...] = ()
+    # the axes over which f repeats ("u", "v"): f(u0, v) = f(u1, v) for "u"; a sampling grid that
+    # spans the domain there skips its last line, a copy of the first (docs/writing-plugins.md)
+    periodic: tuple[str, ...] = ()
     snippet: Snippet | None = None
     origin: str = ""  # where the registry found it: "built-in", "plugin folder ...", "entry point ..."
     # named intermediate results from paramlod.dsl.let, in evaluation order: (symbol, expression);
@@ -685,7 +688,7 @@ def _check_snippet(fname: str, where: str, code: str, param_names) -> str:
 
 def parametric(u: Sequence[float] = (0.0, 1.0), v: Sequence[float] = (0.0, 1.0),
                params: dict | None = None, name: str | None = None, parts: Sequence[Part] | None = None,
-               snippet: str | None = None, fd_step: tuple[float, float] | None = None):
+               snippet: str | None = None, fd_step: tuple[float, float] | None = None, periodic: str = ""):
     """Decorator: turn ``fn(u, v, **params) -> (x, y, z)`` of sympy symbols into a ParametricFunction.
 
     ``params`` maps each parameter name to its default: a number, or a sequence of numbers for an
@@ -696,6 +699,11 @@ def parametric(u: Sequence[float] = (0.0, 1.0), v: Sequence[float] = (0.0, 1.0),
     the shared dialect instead (``kernels/README.md``); ``fn`` is then the numpy reference,
     called with float64 arrays u, v and the parameter values, and the partials are central
     differences with steps ``fd_step`` (default: 1/1000 of each domain's width).
+
+    ``periodic`` names the axes over which the surface closes on itself ("u", "v" or "uv"): with
+    "v", f(u, v0) = f(u, v1) for every u and every parameter value. The point renderers then do not
+    sample the last grid line of a patch that spans the domain there (a copy of the first).
+    Checked at the defaults on a few lines; a parameter value that opens the surface breaks it.
     """
     params = dict(params or {})
 
@@ -734,6 +742,7 @@ def parametric(u: Sequence[float] = (0.0, 1.0), v: Sequence[float] = (0.0, 1.0),
             raise FunctionError(f"plugin '{fname}' ({where}): params {', '.join(unused)} are not arguments of "
                                 f"the function ({', '.join(names)})")
         checked_parts = _check_parts(fname, where, parts, u_rng, v_rng)
+        axes = _check_periodic_axes(fname, where, periodic)
 
         usym, vsym = sp.symbols("u v", real=True)
         plist, flat, kwargs = [], [], {}
@@ -756,7 +765,7 @@ def parametric(u: Sequence[float] = (0.0, 1.0), v: Sequence[float] = (0.0, 1.0),
                 kwargs[pname] = syms
         common = dict(name=fname, u_range=u_rng, v_range=v_rng, params=tuple(plist), u=usym, v=vsym,
                       param_symbols=tuple(flat), source=src, doc=inspect.getdoc(fn) or "",
-                      python_function=fn, line=line, parts=checked_parts)
+                      python_function=fn, line=line, parts=checked_parts, periodic=axes)
 
         if snippet is not None:
             code = _check_snippet(fname, where, snippet, extra)
@@ -769,6 +778,7 @@ def parametric(u: Sequence[float] = (0.0, 1.0), v: Sequence[float] = (0.0, 1.0),
                 raise FunctionError(f"plugin '{fname}' ({where}): fd_step must be two positive numbers, got {fd_step!r}")
             out = ParametricFunction(exprs=None, snippet=Snippet(code, steps), **common)
             _check_reference(out, where)
+            _check_periodic(out, where)
             return out
 
         with collect_bindings() as raw_bindings:   # dsl.let appends to it while the body runs
@@ -783,7 +793,9 @@ def parametric(u: Sequence[float] = (0.0, 1.0), v: Sequence[float] = (0.0, 1.0),
             allowed.add(sym)
         exprs = _check_result(fname, where, result, allowed)
         used = _used_bindings(bindings, exprs)
-        return ParametricFunction(exprs=tuple(exprs), bindings=used, **common)
+        out = ParametricFunction(exprs=tuple(exprs), bindings=used, **common)
+        _check_periodic(out, where)
+        return out
 
     return wrap
 
@@ -843,6 +855,41 @@ def _check_reference(fn: ParametricFunction, where: str) -> None:
     except (ValueError, TypeError) as exc:
         raise FunctionError(f"plugin '{fn.name}' ({where}): its numpy reference returned values that do not "
                             f"broadcast to the shape of u and v: {exc}") from None
+
+
+def _check_periodic_axes(fname: str, where: str, periodic) -> tuple[str, ...]:
+    if not isinstance(periodic, str) or set(periodic) - {"u", "v"} or len(set(periodic)) != len(periodic):
+        raise FunctionError(f"plugin '{fname}' ({where}): periodic must name the axes the surface closes over, "
+                            f"\"u\", \"v\", \"uv\" or \"\", got {periodic!r}")
+    return tuple(a for a in "uv" if a in periodic)
+
+
+PERIODIC_LINES = 33      # points per edge compared by _check_periodic
+PERIODIC_TOLERANCE = 1e-6   # of the largest coordinate on those edges (float32 rounding is 6e-8)
+
+
+def _check_periodic(fn: ParametricFunction, where: str) -> None:
+    """The edges a periodic axis joins must coincide at the defaults: a wrong claim would leave a
+    gap of one sample step along the seam."""
+    for axis in fn.periodic:
+        t = np.linspace(0.0, 1.0, PERIODIC_LINES)
+        (u0, u1), (v0, v1) = fn.u_range, fn.v_range
+        if axis == "u":
+            across = v0 + (v1 - v0) * t
+            a, b = fn.evaluate(np.full_like(t, u0), across), fn.evaluate(np.full_like(t, u1), across)
+        else:
+            across = u0 + (u1 - u0) * t
+            a, b = fn.evaluate(across, np.full_like(t, v0)), fn.evaluate(across, np.full_like(t, v1))
+        with np.errstate(invalid="ignore"):
+            gap = np.linalg.norm(a - b, axis=-1)
+            scale = max(float(np.nanmax(np.abs(np.concatenate([a, b])), initial=0.0)), 1e-30)
+        bad = ~(gap <= PERIODIC_TOLERANCE * scale) & ~(np.isnan(a).any(-1) & np.isnan(b).any(-1))
+        if bad.any():
+            k = int(np.argmax(np.where(bad, np.nan_to_num(gap, nan=np.inf), -1.0)))
+            other, lo, hi = ("v", *fn.u_range) if axis == "u" else ("u", *fn.v_range)
+            raise FunctionError(f"plugin '{fn.name}' ({where}): declared periodic in {axis}, but f at {axis} = {lo:g} "
+                                f"and {axis} = {hi:g} differ by {gap[k]:.3g} at {other} = {across[k]:.4g} (default "
+                                f"parameters); remove '{axis}' from periodic or make the two edges meet")
 
 
 def evaluate(fn_or_name, u, v, **params) -> np.ndarray:

@@ -198,8 +198,8 @@ def _default(p):
 
 def describe_functions() -> list[dict]:
     """One dict per known function, sorted by name, for ``paramlod functions``:
-    name, summary, u and v domains, parameters with defaults (array parameters: their size and
-    default list), kind (sympy or snippet), number of parts, origin and source file."""
+    name, summary, u and v domains, the periodic axes, parameters with defaults (array parameters:
+    their size and default list), kind (sympy or snippet), number of parts, origin and source file."""
     out = []
     for name, f in sorted(all_functions().items()):
         out.append({
@@ -207,6 +207,7 @@ def describe_functions() -> list[dict]:
             "summary": f.summary,
             "u": list(f.u_range),
             "v": list(f.v_range),
+            "periodic": "".join(f.periodic),
             "params": [{"name": p.name, "default": _default(p), "size": p.size} for p in f.params],
             "kind": "snippet" if f.is_snippet else "sympy",
             "parts": len(f.parts),

@@ -7,7 +7,10 @@ The instance uints sent carry the LOD stage's per-instance flags (INST_U ``flags
 (``ONE_SIDED``) lets the stage cull the instance's back-facing patches (kernels/lod/lod.cl). It is
 set for the instances of objects whose material says ``two_sided = False``, when their function
 is smooth (``smooth_function``: the normal cone's bound assumes partials that do not jump);
-materials are two-sided by default, so by default nothing is ever culled as back-facing."""
+materials are two-sided by default, so by default nothing is ever culled as back-facing. Bits 1
+and 2 (``WRAP_U``, ``WRAP_V``) mark the axes over which the instance's function repeats (its
+``periodic``): the point renderers skip the repeated last line of a grid that spans the domain
+there (kernels/points/points.cl ``grid_axis``)."""
 from __future__ import annotations
 
 import warnings
@@ -22,6 +25,8 @@ from paramlod.core.views import as_views
 from paramlod.device.context import cl_device
 
 ONE_SIDED = np.uint32(INSTANCE_U.constant("INST_ONE_SIDED"))   # kernels/lod/lod.cl
+WRAP_U = np.uint32(INSTANCE_U.constant("INST_WRAP_U"))          # kernels/points/points.cl
+WRAP_V = np.uint32(INSTANCE_U.constant("INST_WRAP_V"))
 
 
 # operations whose result or partials jump or kink: no Lipschitz bound of the partials can be read
@@ -43,11 +48,15 @@ def smooth_function(fn) -> bool:
 
 
 def instance_flags(scene, inst_u) -> np.ndarray:
-    """``inst_u`` (uint32 [n, INST_U]) with the LOD stage's flags set (a copy): ONE_SIDED for the
+    """``inst_u`` (uint32 [n, INST_U]) with the per-instance flags set (a copy): ONE_SIDED for the
     instances (parts included) of objects whose material has ``two_sided`` False, where the
-    instance's function is smooth."""
+    instance's function is smooth; WRAP_U / WRAP_V for those whose function is periodic in u / v."""
     one_sided = [o.object_id for o in scene.objects if not o.material.two_sided]
     out = np.array(inst_u, np.uint32, copy=True)
+    if len(out):
+        wraps = np.array([(WRAP_U if "u" in f.periodic else 0) | (WRAP_V if "v" in f.periodic else 0)
+                          for f in scene.functions()], np.uint32)
+        out[:, INSTANCE_U.offset("flags")] |= wraps[out[:, INSTANCE_U.offset("func")]]
     if one_sided and len(out):
         functions = scene.functions()
         smooth = np.array([smooth_function(f) for f in functions], bool)
@@ -82,6 +91,7 @@ class SceneBuffers:
                 "materials": cla.to_device(q, scene.materials()).data,
                 "light": cla.to_device(q, self.light).data,
                 "domains": inst_f[:, 28:32],
+                "flags": inst_u[:, INSTANCE_U.offset("flags")],   # host copies, for the numpy twins
             }
             self._key = key
         return dict(self._dev, cam=self.camera(camera), n_views=len(as_views(camera)))

@@ -14,7 +14,7 @@ from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import POINT_TIERS, tier_divisors
 from paramlod.renderers.occlusion import OcclusionCuller
 from paramlod.renderers.registry import RendererSpec, register_renderer
-from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, side_counts  # noqa: F401  (re-exported)
+from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, patch_wraps, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
 from paramlod.function.programs import POLY_TRIG, build, sample_run
@@ -133,8 +133,8 @@ class DirectPointRenderer:
             k = self._launches[(phase, tier)] = _Launch(self.program)
         bound = (count_buf, count_at, capacity, tier, args)
         if bound != k.bound:
-            k.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), inst[1], *sampling,
-                                np.uint32(settings.max_side), ALL_TIERS if tier is None else np.uint32(tier),
+            k.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), inst[0], inst[1],
+                                *sampling, np.uint32(settings.max_side), ALL_TIERS if tier is None else np.uint32(tier),
                                 self._order, self.counters)
             k.kernel.set_args(*args)
             k.bound = bound

@@ -9,6 +9,8 @@ patch's four boundary lines need (the LOD stage measures them, kernels/lod/lod.c
 the outer seventh of the patch at each end is stepped for w and the rest for s (boundary strips,
 ``grid_axes``), so that two patches sharing an edge both cover it at about 2/7 of the cost of a
 whole grid for w; the supersampled local-framebuffer variant has no holes to close and keeps s_u, s_v.
+A uniform grid that spans the domain along an axis over which the function repeats (its
+``periodic``) does not draw its last line, a copy of its first (``patch_wraps``).
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from paramlod.core.debug_colors import cluster_color, level_color, tier_color
+from paramlod.core.layouts import INSTANCE_U
 from paramlod.core.hashing import hash32
 from paramlod.errors import SceneError
 from paramlod.lod.patches import render_tiers
@@ -29,6 +32,7 @@ COVERAGE = ("centre", "pixel")   # PointSettings.coverage
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
+WRAP_BITS = (INSTANCE_U.constant("INST_WRAP_U"), INSTANCE_U.constant("INST_WRAP_V"))
 
 
 @dataclass
@@ -145,16 +149,33 @@ def grid_axes(s: np.ndarray, w: np.ndarray, boundary: bool, settings: PointSetti
     return n, na, nm
 
 
-def grid_counts(render_list: np.ndarray, settings: PointSettings,
-                boundary: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """(nu, nv) per render patch, from the measure ``settings.sampling`` selects: as the direct
-    variant samples (``boundary``: segment patches with boundary strips, grid_axes) or as the
-    local-framebuffer variant (``boundary=False``)."""
+def patch_wraps(render_list: np.ndarray, flags: np.ndarray, domains: np.ndarray) -> np.ndarray:
+    """Twin of patch_wraps() in points.cl: bool (n, 2), whether each render patch spans its
+    instance's domain along an axis (u, v) over which its function repeats. ``flags``: the
+    instances' INST_U flags (INST_WRAP_U / _V); ``domains``: their (u0, u1, v0, v1)."""
+    inst = render_list["inst"]
+    rng = render_list["range"]
+    dom = np.asarray(domains, np.float32)[inst]
+    f = np.asarray(flags, np.uint32)[inst]
+    return np.stack([((f & bit) != 0) & (rng[:, 2 * k] == dom[:, 2 * k]) & (rng[:, 2 * k + 1] == dom[:, 2 * k + 1])
+                     for k, bit in enumerate(WRAP_BITS)], axis=1)
+
+
+def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool = True,
+                wraps: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(nu, nv) samples drawn per render patch, from the measure ``settings.sampling`` selects: as
+    the direct variant samples (``boundary``: segment patches with boundary strips, grid_axes) or
+    as the local-framebuffer variant (``boundary=False``). ``wraps``: ``patch_wraps`` of the list
+    (None: no patch wraps), whose uniform grids draw one line fewer."""
     code = settings.measure(boundary)
     m = patch_measures(render_list, code)
     strips = int(code) == MEASURE_BOUNDARY
     ext = render_list["ext"]
-    return (grid_axes(ext[:, 2], m[:, 0], strips, settings)[0], grid_axes(ext[:, 3], m[:, 1], strips, settings)[0])
+    out = []
+    for k in range(2):
+        n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings)
+        out.append(n - (wraps[:, k] & (na == 0)) if wraps is not None else n)
+    return out[0], out[1]
 
 
 def patch_debug_materials(render_list: np.ndarray, materials: np.ndarray, color_by: str) -> np.ndarray:

@@ -52,6 +52,20 @@ def test_the_library_is_complete_and_documented():
                         assert f"``{p.name}``" in doc, f"{path.name}: parameter {p.name} undocumented"
 
 
+def test_builtins_that_close_on_themselves_say_so(builtins):
+    """A built-in whose edges meet along an axis declares it periodic (the point renderers then
+    skip the repeated line, docs/points.md "Periodic axes"), and only those."""
+    t = np.linspace(0, 1, 17)
+    for fn in builtins:
+        (u0, u1), (v0, v1) = fn.u_range, fn.v_range
+        across_v, across_u = v0 + (v1 - v0) * t, u0 + (u1 - u0) * t
+        closes = {"u": np.allclose(fn.evaluate(np.full_like(t, u0), across_v), fn.evaluate(np.full_like(t, u1), across_v),
+                                   atol=1e-9),
+                  "v": np.allclose(fn.evaluate(across_u, np.full_like(t, v0)), fn.evaluate(across_u, np.full_like(t, v1)),
+                                   atol=1e-9)}
+        assert fn.periodic == tuple(a for a in "uv" if closes[a]), fn.name
+
+
 def test_every_builtin_matches_numpy_on_opencl(builtins):
     """pl_surface and pl_position of each built-in, compiled together once, against the numpy
     evaluation on a grid: positions within 1e-5 of the object's size, partials within 1e-3."""

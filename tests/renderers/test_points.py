@@ -12,7 +12,7 @@ from paramlod.device.context import cl_device
 from paramlod.function import programs as function_programs
 from paramlod.function.codegen_cl import SPLIT_NONE, SPLIT_U, SPLIT_V, surface_split
 from paramlod.scene.framing import framing_camera
-from paramlod.renderers.points import DirectPointRenderer, grid_counts
+from paramlod.renderers.points import DirectPointRenderer, grid_counts, patch_wraps
 from paramlod.renderers.targets import KeyBuffer
 
 from conftest import NOT_VISITED, iou, record_direct_points, sphere_disc
@@ -75,7 +75,8 @@ def test_early_depth_before_shading_keeps_every_key():
     r = renderer_for(scene)
     dev = r.upload(scene, cam)
     rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings())
-    nu, nv = grid_counts(r.lod.read_render_list(n), settings)
+    rl = r.lod.read_render_list(n)
+    nu, nv = grid_counts(rl, settings, wraps=patch_wraps(rl, dev["flags"], dev["domains"]))
     counts = nu * nv
     q = cl_device().queue
     off = cla.to_device(q, np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint32))

@@ -9,7 +9,7 @@ import pytest
 import paramlod as pl
 from helpers.stages import ParametricStage
 from paramlod.device.context import cl_device
-from paramlod.renderers.points import DirectPointRenderer, grid_counts
+from paramlod.renderers.points import DirectPointRenderer, grid_counts, patch_wraps
 from paramlod.renderers.sampling import patch_debug_materials
 from paramlod.renderers.targets import KeyBuffer
 
@@ -46,7 +46,7 @@ def test_debug_colours_equal_the_twin(color_by):
     rl = stage.lod.read_render_list(n)
     # one render patch per instance, so that per-instance materials can carry per-patch colours
     assert len(rl) == 8 and len(set(rl["inst"].tolist())) == 8, "the LOD split a far sphere"
-    nu, nv = grid_counts(rl, pl.PointSettings())
+    nu, nv = grid_counts(rl, pl.PointSettings(), wraps=patch_wraps(rl, dev["flags"], dev["domains"]))
     counts = nu * nv
     total = int(counts.sum())
     debug = pl.PointSettings(color_by=color_by)
