@@ -49,6 +49,16 @@ def test_wrapped_grids_draw_the_same_frame_with_fewer_samples(coverage):
     assert plain.stats["samples"] == int((nu0 * nv0).sum()) > wrapped.stats["samples"]
     # the dropped sample lay on the first one (to float rounding of f at 2 pi): same coverage,
     # and an image that differs at most by a level where the two samples' keys tied differently
+    _assert_same_frame(wrapped, plain)
+
+
+def test_the_local_framebuffer_variant_wraps_too():
+    wrapped, plain = (pl.render(_scene(fn), CAM, "points-ssaa") for fn in ("torus", torus_open))
+    assert wrapped.stats["samples_unique"] < plain.stats["samples_unique"]
+    _assert_same_frame(wrapped, plain)
+
+
+def _assert_same_frame(wrapped, plain):
     assert np.array_equal(np.isfinite(wrapped.depth), np.isfinite(plain.depth))
     a, b = wrapped.rgb8().astype(int), plain.rgb8().astype(int)
     assert np.abs(a - b).max() <= 1 and (a != b).any(-1).mean() < 1e-3
