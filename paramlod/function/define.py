@@ -114,6 +114,10 @@ class PlacedPart:
     path: str               # e.g. "giant_worm/jaw_inner[1]/tooth[4]"
 
 
+PERIODIC_LINES = 33         # points per edge compared by ParametricFunction.edge_gaps
+PERIODIC_TOLERANCE = 1e-6   # of the largest coordinate on those edges (float32 rounding is 6e-8)
+
+
 @dataclass(eq=False)
 class ParametricFunction:
     """A surface f(u, v) over a rectangular domain, with named parameters."""
@@ -369,6 +373,38 @@ class ParametricFunction:
         if self.is_snippet:
             return self._reference(u, v, block)
         return self._call(self._np_position, u, v, block)
+
+    def edge_gaps(self, axis: str, blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """How far apart the two edges a periodic ``axis`` joins lie ("v": f(u, v0) against
+        f(u, v1)), at PERIODIC_LINES points across, for each parameter block (rows of ``blocks``):
+        (gaps [k, PERIODIC_LINES], the largest coordinate on the edges [k], the points across).
+        Both NaN: no gap; one NaN: an infinite one."""
+        blocks = np.atleast_2d(np.asarray(blocks, np.float64))
+        t = np.linspace(0.0, 1.0, PERIODIC_LINES)
+        (u0, u1), (v0, v1) = self.u_range, self.v_range
+        across = (v0 + (v1 - v0) * t) if axis == "u" else (u0 + (u1 - u0) * t)
+        ends = [(np.full_like(t, end), across) if axis == "u" else (across, np.full_like(t, end))
+                for end in ((u0, u1) if axis == "u" else (v0, v1))]
+        if self.is_snippet:   # the numpy reference takes named values: one block at a time
+            a, b = (np.stack([self._reference(*e, blk) for blk in blocks]) for e in ends)
+        else:                 # the lambdified position broadcasts the parameters' columns
+            cols = [c[:, None] for c in blocks.T]
+            shape = np.empty((len(blocks), PERIODIC_LINES))
+            with np.errstate(all="ignore"):
+                a, b = (np.stack(np.broadcast_arrays(*self._np_position(e[0][None], e[1][None], *cols), shape)[:3],
+                                 axis=-1) for e in ends)
+        with np.errstate(invalid="ignore"):
+            gaps = np.linalg.norm(a - b, axis=-1)
+            scale = np.nanmax(np.abs(np.concatenate([a, b], axis=1)), axis=(1, 2), initial=0.0)
+        both_nan = np.isnan(a).any(-1) & np.isnan(b).any(-1)
+        gaps = np.where(both_nan, 0.0, np.where(np.isnan(gaps), np.inf, gaps))
+        return gaps, scale, across
+
+    def edges_meet(self, axis: str, blocks: np.ndarray) -> np.ndarray:
+        """Per parameter block, whether f closes on itself over ``axis`` (``edge_gaps`` within
+        PERIODIC_TOLERANCE of the largest coordinate)."""
+        gaps, scale, _ = self.edge_gaps(axis, blocks)
+        return np.all(gaps <= PERIODIC_TOLERANCE * np.maximum(scale, 1e-30)[:, None], axis=1)
 
     def surface(self, u, v, block: np.ndarray | None = None, **params):
         """(position, df/du, df/dv), each broadcast(u, v) + (3,), float64.
@@ -703,7 +739,8 @@ def parametric(u: Sequence[float] = (0.0, 1.0), v: Sequence[float] = (0.0, 1.0),
     ``periodic`` names the axes over which the surface closes on itself ("u", "v" or "uv"): with
     "v", f(u, v0) = f(u, v1) for every u and every parameter value. The point renderers then do not
     sample the last grid line of a patch that spans the domain there (a copy of the first).
-    Checked at the defaults on a few lines; a parameter value that opens the surface breaks it.
+    Checked here at the defaults, and with a scene's own values when it is sent to the device
+    (paramlod.lod.uploads.wrap_flags: where the edges do not meet, the seam's line is kept).
     """
     params = dict(params or {})
 
@@ -864,31 +901,17 @@ def _check_periodic_axes(fname: str, where: str, periodic) -> tuple[str, ...]:
     return tuple(a for a in "uv" if a in periodic)
 
 
-PERIODIC_LINES = 33      # points per edge compared by _check_periodic
-PERIODIC_TOLERANCE = 1e-6   # of the largest coordinate on those edges (float32 rounding is 6e-8)
-
-
 def _check_periodic(fn: ParametricFunction, where: str) -> None:
     """The edges a periodic axis joins must coincide at the defaults: a wrong claim would leave a
     gap of one sample step along the seam."""
     for axis in fn.periodic:
-        t = np.linspace(0.0, 1.0, PERIODIC_LINES)
-        (u0, u1), (v0, v1) = fn.u_range, fn.v_range
-        if axis == "u":
-            across = v0 + (v1 - v0) * t
-            a, b = fn.evaluate(np.full_like(t, u0), across), fn.evaluate(np.full_like(t, u1), across)
-        else:
-            across = u0 + (u1 - u0) * t
-            a, b = fn.evaluate(across, np.full_like(t, v0)), fn.evaluate(across, np.full_like(t, v1))
-        with np.errstate(invalid="ignore"):
-            gap = np.linalg.norm(a - b, axis=-1)
-            scale = max(float(np.nanmax(np.abs(np.concatenate([a, b])), initial=0.0)), 1e-30)
-        bad = ~(gap <= PERIODIC_TOLERANCE * scale) & ~(np.isnan(a).any(-1) & np.isnan(b).any(-1))
+        gaps, scale, across = fn.edge_gaps(axis, fn.param_block())
+        bad = gaps[0] > PERIODIC_TOLERANCE * max(float(scale[0]), 1e-30)
         if bad.any():
-            k = int(np.argmax(np.where(bad, np.nan_to_num(gap, nan=np.inf), -1.0)))
+            k = int(np.argmax(np.where(bad, gaps[0], -1.0)))
             other, lo, hi = ("v", *fn.u_range) if axis == "u" else ("u", *fn.v_range)
             raise FunctionError(f"plugin '{fn.name}' ({where}): declared periodic in {axis}, but f at {axis} = {lo:g} "
-                                f"and {axis} = {hi:g} differ by {gap[k]:.3g} at {other} = {across[k]:.4g} (default "
+                                f"and {axis} = {hi:g} differ by {gaps[0, k]:.3g} at {other} = {across[k]:.4g} (default "
                                 f"parameters); remove '{axis}' from periodic or make the two edges meet")
 
 

@@ -47,16 +47,47 @@ def smooth_function(fn) -> bool:
     return True
 
 
-def instance_flags(scene, inst_u) -> np.ndarray:
+WRAP_CHECKED_BLOCKS = 1024   # distinct parameter blocks per function whose periodic edges are checked
+
+
+def wrap_flags(scene, inst_u, params) -> np.ndarray:
+    """WRAP_U / WRAP_V per instance: its function's periodic axes where the edges meet for the
+    scene's parameter values (``ParametricFunction.edges_meet``, on up to WRAP_CHECKED_BLOCKS of
+    the function's distinct parameter blocks, evenly picked). An axis that fails for one is
+    dropped for all the function's instances, with a warning: their grids keep the seam's line.
+    SceneBuffers checks when the scene changes, at its time then, not at every frame of an animation."""
+    func = inst_u[:, INSTANCE_U.offset("func")]
+    offsets = inst_u[:, INSTANCE_U.offset("params")].astype(np.int64)
+    out = np.zeros(len(inst_u), np.uint32)
+    for i, f in enumerate(scene.functions()):
+        mine = func == i
+        if not f.periodic or not mine.any():
+            continue
+        distinct = np.unique(offsets[mine])
+        picked = distinct[np.linspace(0, len(distinct) - 1, min(len(distinct), WRAP_CHECKED_BLOCKS)).astype(np.int64)]
+        blocks = np.asarray(params, np.float32)[picked[:, None] + np.arange(f.param_count)]
+        for axis, bit in (("u", WRAP_U), ("v", WRAP_V)):
+            if axis not in f.periodic:
+                continue
+            meet = f.edges_meet(axis, blocks)
+            if meet.all():
+                out[mine] |= bit
+                continue
+            values = f.param_values(blocks[int(np.argmin(meet))])
+            changed = {k: v for k, v in values.items() if not np.array_equal(v, f.param_values(f.param_block())[k])}
+            warnings.warn(f"'{f.name}' is declared periodic in {axis}, but its edges there do not meet with the "
+                          f"parameters {changed or values}: its point grids keep their seam lines", stacklevel=3)
+    return out
+
+
+def instance_flags(scene, inst_u, wraps) -> np.ndarray:
     """``inst_u`` (uint32 [n, INST_U]) with the per-instance flags set (a copy): ONE_SIDED for the
     instances (parts included) of objects whose material has ``two_sided`` False, where the
-    instance's function is smooth; WRAP_U / WRAP_V for those whose function is periodic in u / v."""
+    instance's function is smooth; ``wraps``, the WRAP_U / WRAP_V bits (``wrap_flags``)."""
     one_sided = [o.object_id for o in scene.objects if not o.material.two_sided]
     out = np.array(inst_u, np.uint32, copy=True)
     if len(out):
-        wraps = np.array([(WRAP_U if "u" in f.periodic else 0) | (WRAP_V if "v" in f.periodic else 0)
-                          for f in scene.functions()], np.uint32)
-        out[:, INSTANCE_U.offset("flags")] |= wraps[out[:, INSTANCE_U.offset("func")]]
+        out[:, INSTANCE_U.offset("flags")] |= wraps
     if one_sided and len(out):
         functions = scene.functions()
         smooth = np.array([smooth_function(f) for f in functions], bool)
@@ -76,6 +107,7 @@ class SceneBuffers:
     def __init__(self, light):
         self.light = light            # the shading record (paramlod.renderers.shading.LIGHT)
         self._key, self._dev = None, None
+        self._wraps = (None, None)   # (scene version, wrap_flags): checked again when the scene changes
         self._cams: dict = {}   # slot -> (device buffer, host records, copy event)
 
     def upload(self, scene, camera) -> dict:
@@ -85,7 +117,9 @@ class SceneBuffers:
         key = (scene._version, scene.time)
         if key != self._key:
             inst_f, inst_u, params = scene.instance_buffers()
-            inst_u = instance_flags(scene, inst_u)
+            if self._wraps[0] != scene._version:   # not at every new time of an animation
+                self._wraps = (scene._version, wrap_flags(scene, inst_u, params))
+            inst_u = instance_flags(scene, inst_u, self._wraps[1])
             self._dev = {
                 "inst": tuple(cla.to_device(q, a).data for a in (inst_f, inst_u, params)),
                 "materials": cla.to_device(q, scene.materials()).data,

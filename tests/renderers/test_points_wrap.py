@@ -6,7 +6,7 @@ import pytest
 from sympy import cos, pi, sin
 
 import paramlod as pl
-from paramlod.lod.uploads import WRAP_U, WRAP_V, instance_flags
+from paramlod.lod.uploads import WRAP_U, WRAP_V, wrap_flags
 from paramlod.renderers.points import grid_counts, patch_wraps
 
 from helpers.stages import ParametricStage
@@ -64,12 +64,26 @@ def _assert_same_frame(wrapped, plain):
     assert np.abs(a - b).max() <= 1 and (a != b).any(-1).mean() < 1e-3
 
 
-def test_instance_flags_mark_the_periodic_axes():
+def test_wrap_flags_mark_the_periodic_axes():
     scene = pl.Scene()
     for fn in ("torus", "sphere", "plane", torus_open):
         scene.add(fn)
-    flags = instance_flags(scene, scene.instance_buffers()[1])[:, 3]
-    assert (flags & (WRAP_U | WRAP_V)).tolist() == [WRAP_U | WRAP_V, WRAP_V, 0, 0]
+    _, inst_u, params = scene.instance_buffers()
+    assert wrap_flags(scene, inst_u, params).tolist() == [WRAP_U | WRAP_V, WRAP_V, 0, 0]
+
+
+def test_parameters_that_open_a_periodic_surface_keep_its_seam():
+    scene = pl.Scene()
+    scene.add("spiky_heart", params={"spikes_v": 21.0})
+    scene.add("spiky_heart", params={"spikes_v": 20.5})   # the spikes no longer meet at v = 0 and 2 pi
+    _, inst_u, params = scene.instance_buffers()
+    with pytest.warns(UserWarning, match=r"'spiky_heart' is declared periodic in v.*spikes_v.*20\.5"):
+        flags = wrap_flags(scene, inst_u, params)
+    assert not (flags & WRAP_V).any()
+    scene = pl.Scene()
+    scene.add("spiky_heart", params={"spikes_v": 21.0})
+    _, inst_u, params = scene.instance_buffers()
+    assert (wrap_flags(scene, inst_u, params) & WRAP_V).all()
 
 
 def test_a_wrong_periodic_claim_names_the_axis_and_the_gap():
