@@ -16,11 +16,9 @@ layout(std430, binding = 1) readonly buffer PlInstF { float pl_inst_f[]; };    /
 layout(std430, binding = 2) readonly buffer PlInstU { uint pl_inst_u[]; };     // [n][PL_INST_U] uints
 layout(std430, binding = 3) readonly buffer PlMaterials { vec4 pl_materials[]; };  // material record: rgb, specular
 // Counters read back into Frame.stats: NaN vertices (evaluation stage), the device's real sample
-// count per pixel of the multisampled targets and the pixels written (resolve pass), the last in
-// 256 counters the host sums (pixel (x, y) adds to slot x % 16 + 16 (y % 16); gl_targets.PIXEL_SLOTS):
-// with one counter every covered pixel's atomic waited for the others (an NVIDIA H100's 4xSS+8xMS
-// frames of the seashells and the yarn curtain took 2-4 % longer).
-layout(std430, binding = 4) buffer PlCounters { uint pl_nan_vertices; uint pl_device_samples; uint pl_pixels_written[]; };
+// count per pixel of the multisampled targets (resolve pass; the pixels written are counted by the
+// count pass, tess_count_fragment.glsl).
+layout(std430, binding = 4) buffer PlCounters { uint pl_nan_vertices; uint pl_device_samples; };
 
 uniform mat4 u_view;        // world -> view
 uniform mat4 u_proj;        // view -> clip

@@ -96,5 +96,4 @@ void main() {
     out_object = id;
     precise vec3 over = straight.rgb * straight.a + u_background * (1.0 - straight.a);
     out_image = srgb8_image(over);
-    if (!isinf(best)) atomicAdd(pl_pixels_written[(p.x & 15) | (p.y & 15) << 4], 1u);
 }

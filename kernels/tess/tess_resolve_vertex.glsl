@@ -1,5 +1,6 @@
-// Resolve, carry and background passes (tess_resolve_fragment.glsl, tess_carry_fragment.glsl,
-// tess_background_fragment.glsl): one full-screen triangle; on the far plane with PL_FAR.
+// Resolve, count, carry and background passes (tess_resolve_fragment.glsl, tess_count_fragment.glsl,
+// tess_carry_fragment.glsl, tess_background_fragment.glsl): one full-screen triangle; on the far
+// plane with PL_FAR.
 void main() {
     vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
 #ifdef PL_FAR

@@ -15,8 +15,9 @@ shader writes them at locations 0-3 (kernels/common/targets.glsl). The resolve
 (kernels/tess/tess_resolve_*.glsl, with the prelude and tess_common.glsl for its counter buffer):
 the hardware multisample resolve of the colour, box-averaged over the SSAA block (straight alpha =
 covered fraction); depth, normal and id of the nearest covered sample of the block, +inf / 0 / 0
-where none is; the 8-bit sRGB image over the background, the host's encoding bit for bit; the
-pixels written, counted.
+where none is; the 8-bit sRGB image over the background, the host's encoding bit for bit. Then
+the count pass (kernels/tess/tess_count_fragment.glsl): an occlusion query of the resolved pixels
+that show something, the pixels written.
 
 noAA targets of one view (``GLTargets.direct``) have no draw targets of their own: the fragments
 write an output set, the image (location 4) included, and the background pass
@@ -131,6 +132,15 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False, half: boo
     return prog
 
 
+def count_program(ctx):
+    """The count pass after a resolve (kernels/tess/tess_count_fragment.glsl), cached."""
+    cache = gl_cache(ctx)
+    prog = cache.get("gl_count_program")
+    if prog is None:
+        prog = cache["gl_count_program"] = _full_screen_program(ctx, {}, [], "tess_count_fragment", "count")
+    return prog
+
+
 def background_program(ctx):
     """The background pass of targets drawn directly (kernels/tess/tess_background_fragment.glsl),
     cached."""
@@ -166,10 +176,8 @@ def carry_vao(ctx, ratio: int, coarse_samples: int):
 
 SRGB8_TABLE_BINDING = 5   # the storage buffer binding of the image's encoding table (common/targets.glsl)
 LENT_SETS = 3   # output sets that lent Frames may hold at once before the oldest is copied to the host
-# the resolve's counter buffer (tess_common.glsl PlCounters): NaN vertices, device samples, then
-# the pixels written in PIXEL_SLOTS counters (tess_resolve_fragment.glsl's slot of a pixel)
-PIXEL_SLOTS = 256
-RESOLVE_COUNTERS_BYTES = 4 * (2 + PIXEL_SLOTS)
+# the resolve's counter buffer (tess_common.glsl PlCounters): NaN vertices, device samples
+RESOLVE_COUNTERS_BYTES = 8
 
 
 class _OutputSet:
@@ -236,7 +244,8 @@ class _Outputs:
             sets.append(self._take_back(key, lent))
         for o in {id(o): o for o in (*sets, *(free or ()))}.values():   # the current set may be lent too
             o.release()
-        _release_attributes(self, (*names, "resolve_vao", "color_resolved", "samples_buffer"))
+        _release_attributes(self, (*names, "resolve_vao", "color_resolved", "samples_buffer", "count_vao",
+                                   "count_query", "count_fbo", "count_zbuf"))
 
     def _failed(self, exc: Exception, what: str):
         """Release what a constructor made before ``exc``, then raise it as a DeviceError naming
@@ -255,16 +264,31 @@ class _Outputs:
         # id(set) -> (the set, a weak reference to the Frame that holds it, its finalizer), oldest first
         self._lent: dict[int, tuple] = {}
         if zbuf is None:   # the resolve's counters (tess_common.glsl PlCounters): [1] the device's
-            # samples per pixel, [2:] the pixels written (targets drawn directly count with a query)
+            # samples per pixel; the pixels written: the count pass (targets drawn directly count
+            # with the background pass's query)
             self.samples_buffer = self.ctx.buffer(reserve=RESOLVE_COUNTERS_BYTES)
+            self.count_zbuf = self.ctx.depth_renderbuffer(self.size)   # a framebuffer for the query
+            self.count_fbo = self.ctx.framebuffer(depth_attachment=self.count_zbuf)
+            self.count_vao = self.ctx.vertex_array(count_program(self.ctx), [])
+            self.count_query = self.ctx.query(samples=True)
         self.resolve_vao = self.ctx.vertex_array(prog, [])
         self.pixels_written = 0
 
+    def _count_written(self):
+        """The count pass (kernels/tess/tess_count_fragment.glsl) over the resolved depth of the
+        current output set, in the occlusion query ``_read_counters`` reads."""
+        self.count_fbo.use()
+        self.ctx.disable(moderngl.DEPTH_TEST)   # every fragment not discarded passes, and is counted
+        self.out.depth.use(location=0)
+        set_uniform(self.count_vao.program, "u_depth", 0)
+        with self.count_query:
+            self.count_vao.render(mode=moderngl.TRIANGLES, vertices=3)
+
     def _read_counters(self) -> int:
-        """The device's samples per pixel from the resolve's counters; sets ``pixels_written``."""
-        counters = np.frombuffer(self.samples_buffer.read(RESOLVE_COUNTERS_BYTES), np.uint32)
-        self.pixels_written = int(counters[2:].sum(dtype=np.int64))
-        return int(counters[1])
+        """The device's samples per pixel from the resolve's counters and ``pixels_written`` from
+        the count pass (both wait for the device)."""
+        self.pixels_written = int(self.count_query.samples)
+        return int(np.frombuffer(self.samples_buffer.read(RESOLVE_COUNTERS_BYTES), np.uint32)[1])
 
     def _next_set(self) -> _OutputSet:
         """The output set the next frame goes into (``out``): one no Frame holds."""
@@ -451,6 +475,7 @@ class GLTargets(_Outputs):
             tex.use(location=unit)
             set_uniform(prog, name, unit)
         self.resolve_vao.render(mode=moderngl.TRIANGLES, vertices=3)
+        self._count_written()
         ctx.finish()
         return self._read_counters()
 
@@ -654,6 +679,7 @@ class LayeredGLTargets(_Outputs):
             set_uniform(prog, name, unit)
         set_uniform(prog, "u_layer", int(layer))
         self.resolve_vao.render(mode=moderngl.TRIANGLES, vertices=3)
+        self._count_written()
 
     def device_samples(self) -> int:
         """The samples per pixel the device really allocated, as the last resolve saw (waits);
