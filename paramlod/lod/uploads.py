@@ -73,8 +73,8 @@ def wrap_flags(scene, inst_u, params) -> np.ndarray:
             if meet.all():
                 out[mine] |= bit
                 continue
-            values = f.param_values(blocks[int(np.argmin(meet))])
-            changed = {k: v for k, v in values.items() if not np.array_equal(v, f.param_values(f.param_block())[k])}
+            values, defaults = f.param_values(blocks[int(np.argmin(meet))]), f.param_values(f.param_block())
+            changed = {k: v for k, v in values.items() if not np.array_equal(v, defaults[k])}
             warnings.warn(f"'{f.name}' is declared periodic in {axis}, but its edges there do not meet with the "
                           f"parameters {changed or values}: its point grids keep their seam lines", stacklevel=3)
     return out
@@ -111,8 +111,9 @@ class SceneBuffers:
         self._cams: dict = {}   # slot -> (device buffer, host records, copy event)
 
     def upload(self, scene, camera) -> dict:
-        """{"inst": (floats, uints, params), "materials", "light", "domains" (host), "cam" (the
-        camera records), "n_views"}; ``camera``: a Camera or a Views."""
+        """{"inst": (floats, uints, params), "materials", "light", "domains" and "flags" (host: the
+        instances' domains and INST_U flags), "cam" (the camera records), "n_views"}; ``camera``: a
+        Camera or a Views."""
         q = cl_device().queue
         key = (scene._version, scene.time)
         if key != self._key:

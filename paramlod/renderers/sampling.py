@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from paramlod.core.debug_colors import cluster_color, level_color, tier_color
-from paramlod.core.layouts import INSTANCE_U
 from paramlod.core.hashing import hash32
+from paramlod.core.layouts import INSTANCE_U
 from paramlod.errors import SceneError
 from paramlod.lod.patches import render_tiers
 
