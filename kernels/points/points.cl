@@ -79,6 +79,15 @@ inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
     return (uint2)(wu, wv);
 }
 
+// A patch's two grid directions, as point_grid samples them and patch_chunks counts them.
+inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, float factor, uint measure,
+                       uint max_side, GridAxis* gu, GridAxis* gv) {
+    float2 m = patch_measure(rp, measure);
+    uint2 wraps = patch_wraps(rp, I, flags);
+    *gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, factor, max_side);
+    *gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, factor, max_side);
+}
+
 // The sampling grid of one patch: nu x nv samples spanning the range widened by `widen` per
 // side (so neighbouring patches overlap and leave no seam), clamped to the function's domain,
 // less the repeated last line of a wrapping axis (grid_axis).
@@ -93,10 +102,8 @@ typedef struct {
 inline PointGrid point_grid(RenderPatch rp, __global const float* I, uint flags, float factor, uint measure,
                             float widen, uint max_side) {
     PointGrid g;
-    float2 m = patch_measure(rp, measure);
-    uint2 wraps = patch_wraps(rp, I, flags);
-    GridAxis gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, factor, max_side);
-    GridAxis gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, factor, max_side);
+    GridAxis gu, gv;
+    patch_axes(rp, I, flags, factor, measure, max_side, &gu, &gv);
     g.nu = gu.n - gu.wrap; g.nv = gv.n - gv.wrap; g.nau = gu.na; g.nav = gv.na;
     g.capped = gu.n == max_side || gv.n == max_side;
     float4 r = sampled_range(rp.range, I, widen);
@@ -372,12 +379,9 @@ inline Runs patch_runs(uint split, uint nu, uint nv) {
 
 inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
                          uint measure, uint max_side) {
-    float2 m = patch_measure(rp, measure);
-    uint2 wraps = patch_wraps(rp, I, flags);
-    GridAxis gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, factor, max_side);
-    GridAxis gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, factor, max_side);
-    uint nu = gu.n - gu.wrap, nv = gv.n - gv.wrap;
-    Runs r = patch_runs(split, nu, nv);
+    GridAxis gu, gv;
+    patch_axes(rp, I, flags, factor, measure, max_side, &gu, &gv);
+    Runs r = patch_runs(split, gu.n - gu.wrap, gv.n - gv.wrap);
     return (r.na * r.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
 }
 

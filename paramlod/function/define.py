@@ -377,8 +377,9 @@ class ParametricFunction:
     def edge_gaps(self, axis: str, blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """How far apart the two edges a periodic ``axis`` joins lie ("v": f(u, v0) against
         f(u, v1)), at PERIODIC_LINES points across, for each parameter block (rows of ``blocks``):
-        (gaps [k, PERIODIC_LINES], the largest coordinate on the edges [k], the points across).
-        Both NaN: no gap; one NaN: an infinite one."""
+        (gaps [k, PERIODIC_LINES], the most each block's gaps may be [k]: PERIODIC_TOLERANCE of the
+        largest coordinate on its edges, the points across). Both NaN: no gap; one NaN: an
+        infinite one."""
         blocks = np.atleast_2d(np.asarray(blocks, np.float64))
         t = np.linspace(0.0, 1.0, PERIODIC_LINES)
         (u0, u1), (v0, v1) = self.u_range, self.v_range
@@ -398,13 +399,13 @@ class ParametricFunction:
             scale = np.nanmax(np.abs(np.concatenate([a, b], axis=1)), axis=(1, 2), initial=0.0)
         both_nan = np.isnan(a).any(-1) & np.isnan(b).any(-1)
         gaps = np.where(both_nan, 0.0, np.where(np.isnan(gaps), np.inf, gaps))
-        return gaps, scale, across
+        return gaps, PERIODIC_TOLERANCE * np.maximum(scale, 1e-30), across
 
     def edges_meet(self, axis: str, blocks: np.ndarray) -> np.ndarray:
-        """Per parameter block, whether f closes on itself over ``axis`` (``edge_gaps`` within
-        PERIODIC_TOLERANCE of the largest coordinate)."""
-        gaps, scale, _ = self.edge_gaps(axis, blocks)
-        return np.all(gaps <= PERIODIC_TOLERANCE * np.maximum(scale, 1e-30)[:, None], axis=1)
+        """Per parameter block, whether f closes on itself over ``axis`` (every ``edge_gaps``
+        within its limit)."""
+        gaps, limit, _ = self.edge_gaps(axis, blocks)
+        return np.all(gaps <= limit[:, None], axis=1)
 
     def surface(self, u, v, block: np.ndarray | None = None, **params):
         """(position, df/du, df/dv), each broadcast(u, v) + (3,), float64.
@@ -905,8 +906,8 @@ def _check_periodic(fn: ParametricFunction, where: str) -> None:
     """The edges a periodic axis joins must coincide at the defaults: a wrong claim would leave a
     gap of one sample step along the seam."""
     for axis in fn.periodic:
-        gaps, scale, across = fn.edge_gaps(axis, fn.param_block())
-        bad = gaps[0] > PERIODIC_TOLERANCE * max(float(scale[0]), 1e-30)
+        gaps, limit, across = fn.edge_gaps(axis, fn.param_block())
+        bad = gaps[0] > limit[0]
         if bad.any():
             k = int(np.argmax(np.where(bad, gaps[0], -1.0)))
             other, lo, hi = ("v", *fn.u_range) if axis == "u" else ("u", *fn.v_range)

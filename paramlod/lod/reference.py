@@ -324,7 +324,8 @@ def run_lod(scene, camera_records, settings, functions=None, tiers=None):
     returns (render patches, per-step stats)."""
     functions = functions or scene.functions()
     inst_f, inst_u, params = scene.instance_buffers()
-    inst = (inst_f, instance_flags(scene, inst_u, wrap_flags(scene, inst_u, params)), params)   # the flags SceneBuffers sends
+    # the flags SceneBuffers sends
+    inst = (inst_f, instance_flags(scene, inst_u, wrap_flags(scene, inst_u, params)), params)
     patches = initial_patches(inst[0][:, 28:32], settings.initial_grid)
     out, steps, made = [], [], 0
     hybrid = (*tier_values(settings, tiers), *settings.spot(), settings.spot_silhouettes) if tiers is not None else None

@@ -20,9 +20,9 @@ import numpy as np
 
 from paramlod.core.debug_colors import cluster_color, level_color, tier_color
 from paramlod.core.hashing import hash32
-from paramlod.core.layouts import INSTANCE_U
 from paramlod.errors import SceneError
 from paramlod.lod.patches import render_tiers
+from paramlod.lod.uploads import WRAP_U, WRAP_V
 
 SAMPLING = ("segment", "extent")
 # the direct variant's colouring (kernels/points/points.cl debug_material): the material, a colour
@@ -32,7 +32,6 @@ COVERAGE = ("centre", "pixel")   # PointSettings.coverage
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
-WRAP_BITS = (INSTANCE_U.constant("INST_WRAP_U"), INSTANCE_U.constant("INST_WRAP_V"))
 
 
 @dataclass
@@ -158,7 +157,7 @@ def patch_wraps(render_list: np.ndarray, flags: np.ndarray, domains: np.ndarray)
     dom = np.asarray(domains, np.float32)[inst]
     f = np.asarray(flags, np.uint32)[inst]
     return np.stack([((f & bit) != 0) & (rng[:, 2 * k] == dom[:, 2 * k]) & (rng[:, 2 * k + 1] == dom[:, 2 * k + 1])
-                     for k, bit in enumerate(WRAP_BITS)], axis=1)
+                     for k, bit in enumerate((WRAP_U, WRAP_V))], axis=1)
 
 
 def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool = True,

@@ -792,7 +792,7 @@ class TessRenderer:
         for v in range(n_views):
             t4 = time.perf_counter()
             tg.resolve(v, scene.background)
-            device_samples = tg.device_samples()   # waits; the layer's pixels written, counted by the resolve
+            device_samples = tg.device_samples()   # waits; the layer's pixels written, by the count pass
             if v == 0 and device_samples != aa.msaa:
                 notes.append(f"the device allocated {device_samples} samples per pixel for a {aa.msaa}-sample "
                              "request; coverage and the depth/id resolve use all of them")
