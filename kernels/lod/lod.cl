@@ -425,6 +425,16 @@ inline float box_float(int k) {
 // patch's, so the work-items a view has stay those one view has); with one view, (32, 1), this is
 // the single-view step bit for bit (the same operations in the same order, a maximum over one
 // view). Local memory: 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views.
+// Compiled per kind of stage (paramlod/lod/stage.py LodStage._kernels): LOD_BACK_TEST 0 leaves the
+// back-face test out (no instance is one-sided, or culling is off), LOD_TIER_CHECKS 0 the hybrid
+// tiers' checks (no hybrid frame). Code a stage never runs still costs the GPU: with both in, the
+// H100's LOD stage took 1.44x as long on the fibre curtain (docs/lod.md).
+#ifndef LOD_BACK_TEST
+#define LOD_BACK_TEST 1
+#endif
+#ifndef LOD_TIER_CHECKS
+#define LOD_TIER_CHECKS 1
+#endif
 __kernel __attribute__((reqd_work_group_size(LOD_GROUP, 1, 1)))
 void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
               __global RenderPatch* render, __global ulong* render_views, uint render_cap,
@@ -499,7 +509,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
         }
 #endif
         // the same for every work-item of the group (one patch), so barriers stay uniform
-        bool one_sided = backface != 0u && (inst_u[inst * INST_U + INST_FLAGS] & INST_ONE_SIDED) != 0u;
+        bool one_sided = LOD_BACK_TEST && backface != 0u && (inst_u[inst * INST_U + INST_FLAGS] & INST_ONE_SIDED) != 0u;
         if (one_sided) {
             for (uint k = l; k < CONE_NODES; k += LOD_GROUP) {
                 float2 uv = cone_uv(k, patch.range, I, widen);
@@ -625,7 +635,8 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
         float tv = tier == 0u ? t_v : tier == 1u ? tier_t.y : tier_t.w;
         // about to be rendered at a tier that has a finer one: a silhouette in a view that sees it
         // (tier 0 only) or the spot check (lod/spot.cl) sends it on
-        bool candidate = tier < max_tier && !force && seen != 0ul && !back && !splits(eu, ev, mixed, tu, tv);
+        bool candidate = LOD_TIER_CHECKS && tier < max_tier && !force && seen != 0ul && !back
+                         && !splits(eu, ev, mixed, tu, tv);
         bool promote = false;
         if (candidate && tier == 0u && silhouettes != 0u)
             for (uint v = 0; v < n_views && !promote; ++v)

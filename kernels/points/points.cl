@@ -410,15 +410,25 @@ __kernel void points_schedule(__global const RenderPatch* patches, __global cons
 
 // Samples written straight into the shared key buffers with early depth twice: a sample is
 // shaded only if key_hidden finds nothing nearer in its pixel, and write_point reads again
-// before it issues an atom_min. `centre` (PointSettings.coverage "centre"): each sample covers
-// the pixels whose centres its cell holds (cover_cells) instead of the pixel it lands in.
+// before it issues an atom_min.
+// Compiled per kind of frame (paramlod/renderers/points.py, DirectPointRenderer.program_for):
+// PL_CENTRE 1 for PointSettings.coverage "centre", each sample covering the pixels whose centres
+// its cell holds (cover_cells) instead of the pixel it lands in; PL_VIEWS 1 for frames of several
+// views. Code a frame never runs still costs the GPU: with both in the kernel and chosen by
+// arguments, the H100 drew the fibre curtain's samples 2.5x slower (docs/points.md).
+#ifndef PL_CENTRE
+#define PL_CENTRE 0
+#endif
+#ifndef PL_VIEWS
+#define PL_VIEWS 0
+#endif
 __kernel __attribute__((reqd_work_group_size(POINTS_LOCAL, 1, 1)))
 void points_direct(__global const RenderPatch* patches, __global const ulong* order,
                    __global const float* inst_f, __global const uint* inst_u,
                    __global const float* params, __global const float4* materials,
-                   __global const float* cam, uint n_views, __global const ulong* view_masks,
+                   __global const float* cam, __global const ulong* view_masks,
                    __global const float* light,
-                   float factor, uint measure, float widen, uint max_side, uint color_by, uint centre,
+                   float factor, uint measure, float widen, uint max_side, uint color_by,
                    __global ulong* color_buf, __global ulong* aux_buf,
                    __global ulong* counters   // samples, atomics, NaN samples, capped patches, schedule
 #ifdef PL_RECORD
@@ -453,8 +463,9 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
             uint object_id = inst_u[inst * INST_U + INST_OBJECT];
             float4 mat = debug_material(materials[inst], rp, color_by);
             PointGrid g = point_grid(rp, I, inst_u[inst * INST_U + INST_FLAGS], factor, measure, widen, max_side);
-            // the views that see the patch (the LOD stage's render_views): the others are skipped
-            ulong seen = n_views == 1u ? 1ul : view_masks[pid];
+#if PL_VIEWS   // the views that see the patch (the LOD stage's render_views): the others are skipped
+            ulong seen = view_masks[pid];
+#endif
             Runs runs = patch_runs(pl_split(func), g.nu, g.nv);
             if (c == first && get_local_id(0) == 0 && g.capped) n_capped++;
             for (; c < min(next, c_end); ++c) {
@@ -477,7 +488,7 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     float3 world, n_obj, tu, tv;
                     float us = grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
                     float vs = grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
-                    int r = centre ? point_eval_partials(func, P, I, runs.split, C, us, vs, &world, &n_obj, &tu, &tv)
+                    int r = PL_CENTRE ? point_eval_partials(func, P, I, runs.split, C, us, vs, &world, &n_obj, &tu, &tv)
                                    : point_eval(func, P, I, runs.split, C, us, vs, &world, &n_obj);
                     n_samples++;
 #ifdef PL_RECORD
@@ -486,15 +497,19 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     if (r == SAMPLE_NAN) { n_nan++; continue; }
                     // one evaluation, shaded and written into every view that sees the patch and
                     // whose frustum holds the sample
+#if PL_VIEWS
                     for (ulong left = seen; left != 0ul; left &= left - 1ul) {
                         uint view = 63u - (uint)clz(left & (~left + 1ul));   // the lowest view left
+#else   // view 0 alone (a loop of one, so that `continue` ends the view as above)
+                    for (uint view = 0u; view < 1u; ++view) {
+#endif
                         __global const float* cv = cam + view * CAM_FLOATS;
                         Placed p;
                         if (point_place(world, cv, &p) != SAMPLE_DRAWN) continue;
                         uint pix = view * layer_pixels + (uint)p.y * W + (uint)p.x;
                         // the pixels it covers: its own, or (centre) those whose centres its cell holds
                         uint cover = COVER_OWN;
-                        if (centre) {
+                        if (PL_CENTRE) {
                             float2 hu = cell_half(us, g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
                             float2 hv = cell_half(vs, g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
                             cover = cover_cells(p, screen_dir(cv, p, tu), screen_dir(cv, p, tv), (float2)(hu.x, hv.x),

@@ -54,7 +54,11 @@ def build(files: list[str], defines: dict | None = None, options: tuple = (), ge
     table) + kernels/common/common.cl + ``generated`` + ``files`` (paths in kernels/);
     ``options`` are extra compiler options; ``describe`` names the generated code's sources in
     the error a failed compile raises."""
-    src = "\n".join([cl_prelude(), kernels.source("common/common.cl"), generated,
+    prelude = cl_prelude()
+    for name in defines or {}:   # a -D the prelude defines again would be silently overridden
+        if re.search(rf"^#define {name}\b", prelude, re.M):
+            raise ValueError(f"OpenCL define {name} is already a macro of the prelude (paramlod.core.layouts)")
+    src = "\n".join([prelude, kernels.source("common/common.cl"), generated,
                       *(kernels.source(f) for f in files)])
     opts = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items())) + tuple(options)
     dev = cl_device()

@@ -149,10 +149,11 @@ class LodStage:
         self._max_group = 1 << (min(dev.device.max_work_group_size, LOD_MAX_GROUP).bit_length() - 1)
         # per kernel layout (lod_layout): one kernel object per step with its arguments bound once
         # (they change only when a buffer grows or the scene, camera buffer, views or threshold
-        # change): a frame only enqueues. The single-view program is built now, others when used.
-        self._step_kernels: dict[tuple[int, int], list] = {}
-        self._bound: dict[tuple[int, int], tuple] = {}
-        self._kernels(1)
+        # change): a frame only enqueues. The program of single-view frames of two-sided materials
+        # without hybrid tiers is built now, others when used.
+        self._step_kernels: dict[tuple, list] = {}   # (layout, back-face test, tiers) -> kernels
+        self._bound: dict[tuple, tuple] = {}
+        self._kernels(1, backface=False, tiers=False)
         self.bufs = [_Buffer(EVAL_DTYPE, 4096), _Buffer(EVAL_DTYPE, 4096)]
         self.render = _Buffer(RENDER_DTYPE, 4096)
         # beside each render patch: the views that see it (bit v: view v), for renderers that skip the others
@@ -177,7 +178,7 @@ class LodStage:
         self.max_groups = dev.device.max_compute_units * (64 if dev.is_gpu else 16)
 
     def run(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1,
-            tiers=None):
+            tiers=None, one_sided: bool = True):
         """Returns (render buffer, render patch count, per-step stats list, ms). ``cam_buf`` holds
         ``n_views`` camera records one after another (``SceneBuffers.upload``'s "cam", "n_views").
 
@@ -186,7 +187,7 @@ class LodStage:
         """
         t0 = time.perf_counter()
         while True:
-            self.enqueue(inst, domains, cam_buf, settings, t_div, n_views, tiers)
+            self.enqueue(inst, domains, cam_buf, settings, t_div, n_views, tiers, one_sided)
             self.read_counters()
             if not self.grow(settings):
                 break
@@ -194,7 +195,7 @@ class LodStage:
         return self.render.buf, n_render, steps, (time.perf_counter() - t0) * 1e3
 
     def enqueue(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1,
-                tiers=None):
+                tiers=None, one_sided: bool = True):
         """Enqueue the whole stage without waiting: the render list lands in ``self.render.buf``
         and its length in ``self.counters[LOD_RENDER_TOTAL]`` on the device, for a renderer that
         reads the count there. Then ``read_counters`` (waits), ``grow`` (True: enqueue the frame
@@ -209,7 +210,10 @@ class LodStage:
         ``tiers``: hybrid anti-aliasing, tiers 1 and 2's (threshold divisor, spot-check scale)
         (tier 0's divisor is ``t_div``): a patch about to be rendered whose spot check finds
         sub-pixel detail is measured again at the next tier (``tier_values``); each render patch
-        carries its tier in ``flags >> TIER_SHIFT``."""
+        carries its tier in ``flags >> TIER_SHIFT``.
+
+        ``one_sided``: whether an instance may be one-sided (``SceneBuffers.upload``'s
+        "one_sided"); False builds the stage without the back-face test (lod.cl LOD_BACK_TEST)."""
         settings.validate()
         _check_views(n_views, cam_buf)
         q = cl_device().queue
@@ -239,8 +243,10 @@ class LodStage:
                  float(curve_cos), max_tier, tuple(tier_t), tuple(tier_scale), float(spot_cos), int(spot_min),
                  bool(settings.spot_silhouettes),
                  *(b.buf for b in (self.init, *self.bufs, self.render, self.render_views)))
-        layout, kernels = self._kernels(n_views)
-        if bound != self._bound.get(layout):
+        variant = (bool(settings.backface_cull) and one_sided, max_tier > 0)
+        layout, kernels = self._kernels(n_views, *variant)
+        kind = (layout, *variant)   # the kernels' key
+        if bound != self._bound.get(kind):
             for step, k in enumerate(kernels[:max_steps], start=1):
                 src = self.init if step == 1 else self.bufs[(step - 1) % 2]
                 k.set_args(src.buf, self.bufs[step % 2].buf, np.uint32(cap), self.render.buf, self.render_views.buf,
@@ -249,7 +255,7 @@ class LodStage:
                            np.uint32(step), np.uint32(step == max_steps), backface, widen, curve_cos,
                            np.uint32(max_tier), cltypes.make_float4(*tier_t), cltypes.make_float2(*tier_scale),
                            spot_cos, spot_min, np.uint32(bool(settings.spot_silhouettes)))
-            self._bound[layout] = bound
+            self._bound[kind] = bound
         if self._start_n != n_init:
             start = np.zeros((16, LOD_COUNTERS), np.uint32)
             start[0, C_CHILDREN] = n_init
@@ -262,19 +268,22 @@ class LodStage:
         grid = (min(max(1, self.max_groups * LOD_LOCAL // group), max(cap, 1)) * group,)
         self.events = [launch(q, k, grid, (group,)) for k in kernels[:steps_n]]
 
-    def _kernels(self, n_views: int):
-        """(layout, the step kernels) for ``n_views`` views, built on first use."""
+    def _kernels(self, n_views: int, backface: bool, tiers: bool):
+        """(layout, the step kernels) for ``n_views`` views, with the back-face test and the hybrid
+        tiers' checks or without them, built on first use."""
         layout = lod_layout(n_views, self._max_group)
-        if layout not in self._step_kernels:
+        key = (layout, backface, tiers)
+        if key not in self._step_kernels:
             group, slots = layout
-            defines = {"LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots}
+            defines = {"LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots,
+                       "LOD_BACK_TEST": int(backface), "LOD_TIER_CHECKS": int(tiers)}
             if not cl_device().is_gpu:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
                 defines[POLY_TRIG] = 1
                 # runs of samples that share the position split's steps (kernels/lod/lod.cl lod_order)
                 defines["LOD_RUN"] = int(SAMPLE_RUNS_CPU)
             prog = build(["lod/lod.cl"], self._functions, defines=defines)
-            self._step_kernels[layout] = [cl.Kernel(prog, "lod_step") for _ in range(15)]
-        return layout, self._step_kernels[layout]
+            self._step_kernels[key] = [cl.Kernel(prog, "lod_step") for _ in range(15)]
+        return layout, self._step_kernels[key]
 
     def read_counters(self, wait: bool = True):
         """Read the enqueued stage's counters back: waiting for them, or (``wait=False``) enqueued

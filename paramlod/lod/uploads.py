@@ -111,9 +111,9 @@ class SceneBuffers:
         self._cams: dict = {}   # slot -> (device buffer, host records, copy event)
 
     def upload(self, scene, camera) -> dict:
-        """{"inst": (floats, uints, params), "materials", "light", "domains" and "flags" (host: the
-        instances' domains and INST_U flags), "cam" (the camera records), "n_views"}; ``camera``: a
-        Camera or a Views."""
+        """{"inst": (floats, uints, params), "materials", "light", "domains", "flags" and
+        "one_sided" (host: the instances' domains and INST_U flags, whether one has ONE_SIDED),
+        "cam" (the camera records), "n_views"}; ``camera``: a Camera or a Views."""
         q = cl_device().queue
         key = (scene._version, scene.time)
         if key != self._key:
@@ -128,6 +128,8 @@ class SceneBuffers:
                 "domains": inst_f[:, 28:32],
                 "flags": inst_u[:, INSTANCE_U.offset("flags")],   # host copies, for the numpy twins
             }
+            # whether the LOD stage needs its back-face test (LodStage.enqueue)
+            self._dev["one_sided"] = bool((self._dev["flags"] & ONE_SIDED).any())
             self._key = key
         return dict(self._dev, cam=self.camera(camera), n_views=len(as_views(camera)))
 

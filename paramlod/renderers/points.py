@@ -75,10 +75,12 @@ class DirectPointRenderer:
         else:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
             defines[POLY_TRIG] = 1
         defines["PL_RUN"] = sample_run(cl_device().is_gpu)   # points.cl patch_runs
-        # occlusion.cl shares the program: the function code is compiled once
-        self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions, defines)
+        self._functions, self._defines = functions, defines
+        # the program of one-view frames with pixel coverage (occlusion.cl shares it: the function
+        # code is compiled once); the other kinds are built when first drawn (program_for)
+        self.program = self.program_for(centre=False, views=False)
         # own kernel objects per list drawn in a frame (all patches, the two occlusion phases, the
-        # hybrid tiers): arguments are set only when they change (see enqueue)
+        # hybrid tiers) and kind of frame: arguments are set only when they change (see enqueue)
         self._launches: dict = {}
         self.record = record
         dev = cl_device()
@@ -90,6 +92,13 @@ class DirectPointRenderer:
         self.events = ()
         # work-groups share the samples evenly: about one resident wave on a GPU
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
+
+    def program_for(self, centre: bool, views: bool):
+        """The program whose points_direct is compiled for pixel-centre coverage (``centre``) and
+        for several views a frame (``views``) or without them (points.cl PL_CENTRE, PL_VIEWS:
+        the GPU draws much faster without code it does not run)."""
+        defines = {**self._defines, "PL_CENTRE": int(centre), "PL_VIEWS": int(views)}
+        return build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], self._functions, defines)
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
                 light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None,
@@ -122,15 +131,15 @@ class DirectPointRenderer:
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * len(COUNTERS), 8)
         sampling = (settings.factor(scale), settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, self._order,
-                *inst, materials_buf, cam_buf, np.uint32(n_views), view_masks, light_buf, *sampling, np.float32(settings.widen),
-                np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)),
-                np.uint32(settings.coverage == "centre"), keys.color, keys.aux,
+                *inst, materials_buf, cam_buf, view_masks, light_buf, *sampling, np.float32(settings.widen),
+                np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)), keys.color, keys.aux,
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time
-        k = self._launches.get((phase, tier))
+        kind = (settings.coverage == "centre", n_views > 1)
+        k = self._launches.get((phase, tier, kind))
         if k is None:
-            k = self._launches[(phase, tier)] = _Launch(self.program)
+            k = self._launches[(phase, tier, kind)] = _Launch(self.program_for(*kind))
         bound = (count_buf, count_at, capacity, tier, args)
         if bound != k.bound:
             k.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), inst[0], inst[1],
@@ -200,7 +209,7 @@ class DirectPoints:
             return
         d = self.dev
         lod, pts = self.lod, self.points
-        lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"])
+        lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"], one_sided=d["one_sided"])
         draw = (d["inst"], d["materials"], d["cam"], d["light"], target, settings.points)
         mode = settings.points.occlusion
         self.culled = self.occlusion is not None and mode is not False and d["n_views"] == 1 \
@@ -222,7 +231,7 @@ class DirectPoints:
         d, lod = self.dev, self.lod
         if tier == 0:
             lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, n_views=d["n_views"],
-                        tiers=tier_divisors(POINT_TIERS))
+                        tiers=tier_divisors(POINT_TIERS), one_sided=d["one_sided"])
             self.culled = self.auto_frame = False   # the tiers are drawn without occlusion culling
         scale = POINT_TIERS[tier].ss
         cam = d["cam"] if scale == 1 else self.buffers.camera(self.camera.with_size((target.width, target.height)),

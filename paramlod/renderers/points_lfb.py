@@ -222,7 +222,8 @@ class LocalFramebufferPoints:
     def enqueue(self, target, settings):
         d = self.dev
         while True:
-            self.lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, t_div=settings.ssaa.lod_divisor)
+            self.lod.enqueue(d["inst"], d["domains"], d["cam"], settings.lod, t_div=settings.ssaa.lod_divisor,
+                             one_sided=d["one_sided"])
             self.lod.read_counters()
             if not self.lod.grow(settings.lod):
                 break

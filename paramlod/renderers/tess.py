@@ -875,7 +875,7 @@ class Tessellation:
         multi = isinstance(camera, Views)
         if multi:
             _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], settings.lod, t_div=div,
-                                               n_views=len(camera))
+                                               n_views=len(camera), one_sided=d["one_sided"])
         else:
             tiers, lod = None, settings.lod
             if aa.hybrid:   # tiers 1 and 2's (threshold divisor, spot-check scale)
@@ -883,7 +883,8 @@ class Tessellation:
             elif settings.tess.detail_levels:   # the spot check's tiers in this mode's targets
                 tiers = tuple((div * d, d) for d in DETAIL_DIVISORS[1:])
                 lod = replace(lod, spot_silhouettes=False)   # edges: a matter of anti-aliasing, not levels
-            _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], lod, t_div=div, tiers=tiers)
+            _, n, steps, lod_ms = self.lod.run(d["inst"], d["domains"], d["cam"], lod, t_div=div, tiers=tiers,
+                                               one_sided=d["one_sided"])
         t1 = time.perf_counter()
         records = self.lod.read_render_list(n)
         masks = self.lod.read_render_views(n) if multi else None   # the views that see each patch

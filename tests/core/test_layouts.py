@@ -15,6 +15,7 @@ from paramlod.core import color, layouts, shading
 from paramlod.core.layouts import (CAMERA, EVAL_PATCH, INSTANCE_F, INSTANCE_U, LIGHT, LOD_COUNTER, MATERIAL,
                                    RECORDS, RENDER_PATCH, camera_record, cl_prelude, glsl_prelude)
 from paramlod.device.context import cl_device, gl_context
+from paramlod.device.programs import build
 from paramlod.function.registry import get_function
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE
 from paramlod.renderers.tess import PATCH_ATTRIBUTES, PATCH_FORMAT, _stage
@@ -110,6 +111,13 @@ def _cl_run(src: str, n_out: int, dtype=np.uint32, args=()):
 
 def test_cl_prelude_compiles_alone():
     cl.Program(cl_device().context, cl_prelude() + "\n__kernel void probe(__global uint* o) { o[0] = 1u; }\n").build()
+
+
+def test_a_build_define_the_prelude_has_is_refused():
+    """A -D of a macro the prelude defines again would be overridden without an error (the LOD
+    stage's first LOD_BACKFACE switch kept the counter index 5): the build names it instead."""
+    with pytest.raises(ValueError, match="LOD_BACKFACE is already a macro of the prelude"):
+        build(["common/keys.cl"], {"LOD_BACKFACE": 0})
 
 
 def test_cl_sizes_and_offsets_agree():

@@ -18,5 +18,6 @@ class ParametricStage:
         """The LOD stage run once for ``camera`` (``tiers``: hybrid tiers 1 and 2's divisors):
         (render list, per-step stats)."""
         dev = self.upload(scene, camera)
-        _, n, steps, _ = self.lod.run(dev["inst"], dev["domains"], dev["cam"], lod, tiers=tiers)
+        _, n, steps, _ = self.lod.run(dev["inst"], dev["domains"], dev["cam"], lod, tiers=tiers,
+                                      one_sided=dev["one_sided"])   # the kind of stage a renderer builds
         return self.lod.read_render_list(n), steps

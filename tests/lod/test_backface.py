@@ -30,10 +30,14 @@ def scene_of(fname, transform=None, two_sided=False):
     return scene if two_sided else one_sided(scene)
 
 
-def cl_lod(scene, cameras, lod):
+def cl_lod(scene, cameras, lod, one_sided=None):
+    """The render list and steps of the LOD stage, built with the back-face test where the upload
+    says an instance is one-sided, as the renderers do (``one_sided``: forced)."""
     stage = ParametricStage(scene)
     dev = stage.upload(scene, Views(cameras))
-    _, n, steps, _ = stage.lod.run(dev["inst"], dev["domains"], dev["cam"], lod, n_views=dev["n_views"])
+    one_sided = dev["one_sided"] if one_sided is None else one_sided
+    _, n, steps, _ = stage.lod.run(dev["inst"], dev["domains"], dev["cam"], lod, n_views=dev["n_views"],
+                                   one_sided=one_sided)
     return stage.lod.read_render_list(n), steps
 
 
@@ -149,7 +153,8 @@ def test_closed_surface_culls_about_half_and_draws_the_same(fname, eye):
 
 def test_two_sided_objects_never_cull():
     """The default material is two-sided: the render list is the one without back-face culling,
-    from every side; a one-sided open sheet seen from behind is culled whole, from the front kept."""
+    from every side, and the one of the stage built with its back-face test; a one-sided open
+    sheet seen from behind is culled whole, from the front kept."""
     lod = pl.LodSettings(threshold=(16.0, 16.0))
     for eye in ((0, 0, 3.0), (0, 0, -3.0), (2.0, 1.0, 0.5)):
         scene = scene_of("sphere", two_sided=True)
@@ -157,7 +162,15 @@ def test_two_sided_objects_never_cull():
         off, steps_off = cl_lod(scene, [look(eye)], pl.LodSettings(threshold=(16.0, 16.0), backface_cull=False))
         assert sum(s["backface"] for s in steps) == 0 and steps == steps_off
         np.testing.assert_array_equal(got[sort_key(got)]["range"], off[sort_key(off)]["range"])
+    # the stage compiled without the back-face test (two-sided scenes) makes the same list
+    scene = scene_of("torus", two_sided=True)
+    assert not ParametricStage(scene).upload(scene, look((0.3, 1.2, 2.6)))["one_sided"]
+    without, steps_without = cl_lod(scene, [look((0.3, 1.2, 2.6))], lod)
+    tested, steps_tested = cl_lod(scene, [look((0.3, 1.2, 2.6))], lod, one_sided=True)
+    assert steps_without == steps_tested
+    np.testing.assert_array_equal(without[sort_key(without)], tested[sort_key(tested)])
     sheet = scene_of("plane", np.eye(4))
+    assert ParametricStage(sheet).upload(sheet, look((0.3, 0.2, 3.0)))["one_sided"]
     front, _ = cl_lod(sheet, [look((0.3, 0.2, 3.0))], lod)      # plane's df/du x df/dv: +z
     back, steps = cl_lod(sheet, [look((0.3, 0.2, -3.0))], lod)
     assert len(front) > 0 and len(back) == 0 and sum(s["backface"] for s in steps) > 0
