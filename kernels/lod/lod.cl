@@ -380,6 +380,25 @@ inline uint lod_order(uint split, uint j) {
     return j;
 }
 
+// GPUs (not LOD_RUN): the work-items share the split's steps through local memory instead. The 89
+// samples take 17 values of the split's parameter (8 along its lines, 4 of the lines across, 5 of
+// the grid): LOD_AXES work-items evaluate one each, then every sample evaluates the rest.
+// lod_axis: the value a sample takes; lod_axis_sample: a sample that takes value a (its
+// parameter from lod_uv, so the same float as the sample's, and the positions pl_position's).
+#define LOD_AXES 17
+inline uint lod_axis(uint split, uint s) {
+    if (s >= 64u) return 12u + (split == PL_SPLIT_U ? (s - 64u) % 5u : (s - 64u) / 5u);
+    bool along = (s < 32u) == (split == PL_SPLIT_U);   // a line along the split's parameter
+    return along ? (s & 7u) : 8u + ((s & 31u) >> 3);
+}
+
+inline uint lod_axis_sample(uint split, uint a) {
+    uint along = split == PL_SPLIT_U ? 0u : 32u, across = 32u - along;
+    if (a < 8u) return along + a;
+    if (a < 12u) return across + (a - 8u) * 8u;
+    return 64u + (split == PL_SPLIT_U ? a - 12u : (a - 12u) * 5u);
+}
+
 inline Sample lod_at(__local const float2* pos, __local const uchar* state, uint s) {
     Sample q;
     q.s = pos[s]; q.state = state[s]; q.code = 0u;
@@ -424,7 +443,8 @@ inline float box_float(int k) {
 // views, more work-items, 32 a slot, up to (256, 8): a step's few patches make its time one
 // patch's, so the work-items a view has stay those one view has); with one view, (32, 1), this is
 // the single-view step bit for bit (the same operations in the same order, a maximum over one
-// view). Local memory: 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views.
+// view). Local memory: 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views; on GPUs 68
+// bytes more for each float the split carries (axis_c: 2.2 KB for the glyphs' 32).
 // Compiled per kind of stage (paramlod/lod/stage.py LodStage._kernels): LOD_BACK_TEST 0 leaves the
 // back-face test out (no instance is one-sided, or culling is off), LOD_TIER_CHECKS 0 the hybrid
 // tiers' checks (no hybrid frame). Code a stage never runs still costs the GPU: with both in, the
@@ -450,6 +470,9 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
               uint silhouettes)   // hybrid: patches with a silhouette go from tier 0 to tier 1
 {
     __local float4 wpos[LOD_SAMPLES];                      // world position; w: 1 for a bad sample
+#if !LOD_RUN
+    __local float axis_c[LOD_AXES * PL_SPLIT_FLOATS];      // the split's carried values (lod_axis)
+#endif
     __local float2 pos[LOD_SLOTS * LOD_SAMPLES];           // screen positions of a chunk's views
     __local uchar state[LOD_SLOTS * LOD_SAMPLES];          // Sample.state
     __local float4 box_part[LOD_GROUP];
@@ -503,9 +526,27 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
             }
         }
 #else
-        for (uint s = l; s < LOD_SAMPLES; s += LOD_GROUP) {
-            float2 uv = lod_uv(s, u0, v0, du, dv);
-            wpos[s] = lod_world(I, pl_position(func, uv.x, uv.y, P));
+        uint split = pl_position_split(func);   // the group's: one patch, so the barrier is uniform
+        if (split) {
+            for (uint a = l; a < LOD_AXES; a += LOD_GROUP) {
+                float2 uv = lod_uv(lod_axis_sample(split, a), u0, v0, du, dv);
+                float C[PL_SPLIT_FLOATS];
+                pl_position_axis(func, split == PL_SPLIT_U ? uv.x : uv.y, P, C);
+                for (uint k = 0; k < PL_SPLIT_FLOATS; ++k) axis_c[a * PL_SPLIT_FLOATS + k] = C[k];
+            }
+            barrier(CLK_LOCAL_MEM_FENCE);
+            for (uint s = l; s < LOD_SAMPLES; s += LOD_GROUP) {
+                float2 uv = lod_uv(s, u0, v0, du, dv);
+                float C[PL_SPLIT_FLOATS];
+                __local const float* c = axis_c + lod_axis(split, s) * PL_SPLIT_FLOATS;
+                for (uint k = 0; k < PL_SPLIT_FLOATS; ++k) C[k] = c[k];
+                wpos[s] = lod_world(I, pl_position_rest(func, uv.x, uv.y, P, C));
+            }
+        } else {
+            for (uint s = l; s < LOD_SAMPLES; s += LOD_GROUP) {
+                float2 uv = lod_uv(s, u0, v0, du, dv);
+                wpos[s] = lod_world(I, pl_position(func, uv.x, uv.y, P));
+            }
         }
 #endif
         // the same for every work-item of the group (one patch), so barriers stay uniform

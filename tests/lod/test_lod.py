@@ -1,10 +1,11 @@
 """The OpenCL LOD stage against its numpy twin, and the stage's invariants."""
 import numpy as np
 import pytest
+import sympy
 from hypothesis import given, settings, strategies as st
 
 import paramlod as pl
-from paramlod.function.codegen_cl import SPLIT_U, position_split
+from paramlod.function.codegen_cl import SPLIT_U, SPLIT_V, position_split
 from paramlod.lod import stage as stage_module
 from paramlod.lod.reference import lod_step, run_lod
 from paramlod.lod.patches import FLAG_FORCED, EVAL_DTYPE, sort_key
@@ -52,15 +53,26 @@ def test_cl_lod_matches_numpy_reference(fname, eye, target):
     np.testing.assert_allclose(gext, rext, rtol=1e-3, atol=1e-3)
 
 
+@pl.parametric(u=(0, 1), v=(0, 2 * sympy.pi), name="lod_test_ring")
+def ring(u, v):
+    """A band whose radius costs more in v than anything costs in u: its position splits along v."""
+    r = 1 + 0.2 * sympy.sin(3 * v) * sympy.cos(5 * v) + 0.1 * sympy.sqrt(2 + sympy.cos(7 * v)) * sympy.sin(2 * v)
+    return u, r * sympy.cos(v), r * sympy.sin(v)
+
+
 def test_runs_of_split_samples_give_the_same_render_list(monkeypatch):
-    # on CPU devices a work-item evaluates a run of samples, the steps of the position split's
-    # parameter once for those sharing it (kernels/lod/lod.cl lod_order): fibre and glyph split
-    # along u, the sphere not at all; the render list is the one of one sample at a time, bit for bit
+    # CPU devices: a work-item evaluates a run of samples, the steps of the position split's
+    # parameter once for those sharing it (kernels/lod/lod.cl lod_order); GPUs (SAMPLE_RUNS_CPU
+    # False here): one sample a work-item, the split's 17 values of its parameter evaluated once
+    # each and shared in local memory (lod_axis). Fibre and glyph split along u, the ring along v,
+    # the sphere not at all; the render lists are the same, bit for bit
     scene = pl.Scene()
     scene.add("fiber", transform=pl.scale(0.2))
     scene.add("sh_glyph", transform=pl.translate(1.5, 0, 0) @ pl.scale(0.5))
     scene.add("sphere", transform=pl.translate(-1.5, 0, 0) @ pl.scale(0.5))
-    assert [None if p is None else p.axis for p in map(position_split, scene.functions())] == [SPLIT_U, SPLIT_U, None]
+    scene.add(ring, transform=pl.translate(0, -1.5, 0) @ pl.scale(0.4))
+    assert [None if p is None else p.axis for p in map(position_split, scene.functions())] == \
+        [SPLIT_U, SPLIT_U, None, SPLIT_V]
     cam = pl.Camera.look_at((0.3, 0.8, 4.0), (0, 0, 0), size=(320, 240))
     lists = []
     for runs in (False, True):
