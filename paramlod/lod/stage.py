@@ -120,7 +120,7 @@ LOD_RENDER_TOTAL = LOD_COUNTER.constant("LOD_RENDER_TOTAL")   # counters[0, 1]: 
 LOD_LOCAL = constant("LOD_LOCAL")   # work-items measuring one patch together (kernels/lod/lod.cl)
 # views one work-group projects at once (local memory: 89 x 9 bytes a view)
 LOD_MAX_SLOTS = 8
-SAMPLE_RUNS_CPU = True   # kernels/lod/lod.cl LOD_RUN on CPU devices (GPUs: one sample a work-item in turn)
+SAMPLE_RUNS_CPU = True   # kernels/lod/lod.cl LOD_RUN on CPU devices (GPUs: lod_axis, the split shared in local memory)
 LOD_MAX_GROUP = 256   # work-items a patch at most (every OpenCL GPU takes 256)
 
 
