@@ -67,7 +67,7 @@ def record_direct_points(settings, size, scene=None, cam=None):
         cam = pl.Camera.look_at((0.5, 0.8, 3.5), (0.3, 0, 0), size=size)
     r = renderer_for(scene)
     dev = r.upload(scene, cam)
-    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings())
+    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings(), one_sided=dev["one_sided"])
     rl = r.lod.read_render_list(n)
     nu, nv = grid_counts(rl, settings, wraps=patch_wraps(rl, dev["flags"], dev["domains"]))
     counts = nu * nv

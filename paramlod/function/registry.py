@@ -23,7 +23,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from paramlod.errors import FunctionError
-from paramlod.function.define import ParametricFunction
+from paramlod.function.define import ParametricFunction, built_in_definitions
 from paramlod.function.plugins import load_entry_points, load_plugin_folder, validate
 
 ENV_VAR = "PARAMLOD_FUNCTIONS_PATH"
@@ -44,7 +44,8 @@ def builtin_functions() -> dict[str, ParametricFunction]:
     for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
             continue
-        module = importlib.import_module(f"{pkg.__name__}.{info.name}")
+        with built_in_definitions():
+            module = importlib.import_module(f"{pkg.__name__}.{info.name}")
         # built-in plugins may not import this room (tests/test_layers.py): they declare their
         # builders as data, registered here under "module:name"
         for key, fn in getattr(module, "BUILDERS", {}).items():

@@ -121,15 +121,15 @@ class SceneBuffers:
             if self._wraps[0] != scene._version:   # not at every new time of an animation
                 self._wraps = (scene._version, wrap_flags(scene, inst_u, params))
             inst_u = instance_flags(scene, inst_u, self._wraps[1])
+            flags = inst_u[:, INSTANCE_U.offset("flags")]
             self._dev = {
                 "inst": tuple(cla.to_device(q, a).data for a in (inst_f, inst_u, params)),
                 "materials": cla.to_device(q, scene.materials()).data,
                 "light": cla.to_device(q, self.light).data,
                 "domains": inst_f[:, 28:32],
-                "flags": inst_u[:, INSTANCE_U.offset("flags")],   # host copies, for the numpy twins
+                "flags": flags,   # host copies, for the numpy twins
+                "one_sided": bool((flags & ONE_SIDED).any()),   # the LOD stage's back-face test (LodStage.enqueue)
             }
-            # whether the LOD stage needs its back-face test (LodStage.enqueue)
-            self._dev["one_sided"] = bool((self._dev["flags"] & ONE_SIDED).any())
             self._key = key
         return dict(self._dev, cam=self.camera(camera), n_views=len(as_views(camera)))
 

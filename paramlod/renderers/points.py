@@ -76,9 +76,11 @@ class DirectPointRenderer:
             defines[POLY_TRIG] = 1
         defines["PL_RUN"] = sample_run(cl_device().is_gpu)   # points.cl patch_runs
         self._functions, self._defines = functions, defines
-        # the program of one-view frames with pixel coverage (occlusion.cl shares it: the function
-        # code is compiled once); the other kinds are built when first drawn (program_for)
-        self.program = self.program_for(centre=False, views=False)
+        # the program of one-view frames with pixel coverage, which occlusion.cl shares (the
+        # function code is compiled once; OcclusionCuller takes its kernels whatever the frame's
+        # kind); the other kinds are built when first drawn (program_for)
+        self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions,
+                             self._kind_defines(False, False))
         # own kernel objects per list drawn in a frame (all patches, the two occlusion phases, the
         # hybrid tiers) and kind of frame: arguments are set only when they change (see enqueue)
         self._launches: dict = {}
@@ -93,12 +95,16 @@ class DirectPointRenderer:
         # work-groups share the samples evenly: about one resident wave on a GPU
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
 
+    def _kind_defines(self, centre: bool, views: bool) -> dict:
+        return {**self._defines, "PL_CENTRE": int(centre), "PL_VIEWS": int(views)}
+
     def program_for(self, centre: bool, views: bool):
         """The program whose points_direct is compiled for pixel-centre coverage (``centre``) and
         for several views a frame (``views``) or without them (points.cl PL_CENTRE, PL_VIEWS:
         the GPU draws much faster without code it does not run)."""
-        defines = {**self._defines, "PL_CENTRE": int(centre), "PL_VIEWS": int(views)}
-        return build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], self._functions, defines)
+        if not (centre or views):
+            return self.program
+        return build(["common/keys.cl", "points/points.cl"], self._functions, self._kind_defines(centre, views))
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
                 light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None,

@@ -74,7 +74,7 @@ def test_early_depth_before_shading_keeps_every_key():
     settings = pl.PointSettings()
     r = renderer_for(scene)
     dev = r.upload(scene, cam)
-    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings())
+    rbuf, n, _, _ = r.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings(), one_sided=dev["one_sided"])
     rl = r.lod.read_render_list(n)
     nu, nv = grid_counts(rl, settings, wraps=patch_wraps(rl, dev["flags"], dev["domains"]))
     counts = nu * nv

@@ -42,7 +42,7 @@ def test_debug_colours_equal_the_twin(color_by):
     stage = ParametricStage(scene)
     stage.scene, stage.camera = scene, cam
     dev = stage.upload(scene, cam)
-    rbuf, n, _, _ = stage.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings())
+    rbuf, n, _, _ = stage.lod.run(dev["inst"], dev["domains"], dev["cam"], pl.LodSettings(), one_sided=dev["one_sided"])
     rl = stage.lod.read_render_list(n)
     # one render patch per instance, so that per-instance materials can carry per-patch colours
     assert len(rl) == 8 and len(set(rl["inst"].tolist())) == 8, "the LOD split a far sphere"
