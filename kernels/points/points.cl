@@ -94,6 +94,7 @@ inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, floa
 typedef struct {
     float u0, v0, su, sv;   // first sample and (middle) steps
     uint nu, nv;            // samples drawn per direction
+    uint nu_grid, nv_grid;  // samples per direction, a wrapping axis's repeated last line included
     float u1, v1, au, av;   // last sample, strip steps (boundary strips only)
     uint nau, nav;          // strip steps per end; 0: uniform
     uint capped;            // a direction has max_side samples
@@ -105,6 +106,7 @@ inline PointGrid point_grid(RenderPatch rp, __global const float* I, uint flags,
     GridAxis gu, gv;
     patch_axes(rp, I, flags, factor, measure, max_side, &gu, &gv);
     g.nu = gu.n - gu.wrap; g.nv = gv.n - gv.wrap; g.nau = gu.na; g.nav = gv.na;
+    g.nu_grid = gu.n; g.nv_grid = gv.n;
     g.capped = gu.n == max_side || gv.n == max_side;
     float4 r = sampled_range(rp.range, I, widen);
     float u0 = r.x, u1 = r.y, v0 = r.z, v1 = r.w;
@@ -310,6 +312,81 @@ inline float2 cell_half(float x, float x0, float x1, uint n, uint na, float a, f
     return (float2)(prev, next) * (0.5f * COVER_MARGIN);
 }
 
+// Quad coverage (PointSettings.coverage "quad"; cover_triangle's twin:
+// paramlod.renderers.sampling.cover_triangle). Neighbouring samples of a patch's grid are the corners of quads, each drawn as
+// two triangles that cover the pixels whose centres they hold, as a rasterizer covers a mesh of
+// the sample grid: a silhouette is its polygon's, where a sample's linearised cell (cover_cells)
+// reaches past it wherever the surface turns sharply (the tips of thin glyph lobes). A quad is
+// exact however far apart its corners are, so its grid may be coarser (docs/points.md).
+typedef struct {
+    float x, y, depth;   // screen position (pixels, not clipped to the image) and view depth
+    float3 e, n;         // view-space position and normal direction after the instance transform
+    uint state;          // SAMPLE_DRAWN, or SAMPLE_NAN, or SAMPLE_CLIPPED outside the depth range
+} QuadVertex;
+
+// A corner evaluated and placed, not shaded: only the pixels that pass early depth are. A quad
+// with a corner NaN or outside the depth range is not drawn (as a sample there is not).
+inline QuadVertex quad_vertex(uint func, __global const float* P, __global const float* I, uint split, const float* C,
+                              float u, float v, __global const float* cam) {
+    QuadVertex q;
+    q.state = SAMPLE_NAN; q.x = q.y = q.depth = 0.0f; q.e = q.n = (float3)(0.0f);
+    float3 world;
+    if (point_eval(func, P, I, split, C, u, v, &world, &q.n) == SAMPLE_NAN) return q;
+    q.state = SAMPLE_CLIPPED;
+    q.e = xform_point(cam + CAM_VIEW, world);
+    q.depth = -q.e.z;
+    if (!(q.depth >= cam[CAM_NEAR] && q.depth <= cam[CAM_FAR])) return q;
+    float4 c = project(cam, q.e);
+    q.x = (c.x / c.w * 0.5f + 0.5f) * cam[CAM_W];
+    q.y = (0.5f - c.y / c.w * 0.5f) * cam[CAM_H];
+    if (isfinite(q.x) && isfinite(q.y)) q.state = SAMPLE_DRAWN;
+    return q;
+}
+
+// twice the signed area of (a, b, q): > 0 when q is left of a -> b
+inline float edge_fn(float ax, float ay, float bx, float by, float qx, float qy) {
+#pragma OPENCL FP_CONTRACT OFF   // as its twin evaluates it
+    return (bx - ax) * (qy - ay) - (by - ay) * (qx - ax);
+}
+
+// Writes the pixels whose centres the triangle (a, b, c) holds (edges included, either winding;
+// none when it has no area) inside the W x H image: depth interpolated at the centre, shaded
+// with the normal of the corner nearest to it. Returns the colour atomics issued.
+inline uint cover_triangle(QuadVertex a, QuadVertex b, QuadVertex c, __global const float* cam, float4 mat,
+                           __global const float* light, uint object_id,
+                           __global ulong* color_buf, __global ulong* aux_buf) {
+#pragma OPENCL FP_CONTRACT OFF
+    float area = edge_fn(a.x, a.y, b.x, b.y, c.x, c.y);
+    if (!(area != 0.0f)) return 0u;
+    uint W = (uint)cam[CAM_W], H = (uint)cam[CAM_H];
+    float x0 = fmax(ceil(fmin(fmin(a.x, b.x), c.x) - 0.5f), 0.0f);
+    float x1 = fmin(floor(fmax(fmax(a.x, b.x), c.x) - 0.5f), (float)W - 1.0f);
+    float y0 = fmax(ceil(fmin(fmin(a.y, b.y), c.y) - 0.5f), 0.0f);
+    float y1 = fmin(floor(fmax(fmax(a.y, b.y), c.y) - 0.5f), (float)H - 1.0f);
+    uint issued = 0u;
+    float inv = 1.0f / area;
+    for (float py = y0; py <= y1; py += 1.0f) {
+        for (float px = x0; px <= x1; px += 1.0f) {
+            float qx = px + 0.5f, qy = py + 0.5f;
+            float wa = edge_fn(b.x, b.y, c.x, c.y, qx, qy);   // a's weight (times area)
+            float wb = edge_fn(c.x, c.y, a.x, a.y, qx, qy);
+            float wc = edge_fn(a.x, a.y, b.x, b.y, qx, qy);
+            if (!((wa >= 0.0f && wb >= 0.0f && wc >= 0.0f) || (wa <= 0.0f && wb <= 0.0f && wc <= 0.0f))) continue;
+            float la = wa * inv, lb = wb * inv, lc = wc * inv;
+            Placed p;
+            p.depth = la * a.depth + lb * b.depth + lc * c.depth;
+            uint pix = (uint)py * W + (uint)px;
+            if (key_hidden(color_buf, pix, p.depth)) continue;
+            QuadVertex n = la >= lb && la >= lc ? a : lb >= lc ? b : c;
+            p.e = n.e;
+            ulong key, aux;
+            point_keys(p, n.n, cam, mat, light, object_id, &key, &aux);
+            issued += write_point(color_buf, aux_buf, pix, key, aux);
+        }
+    }
+    return issued;
+}
+
 // Evaluate, transform, clip and shade one sample for one view (point_eval, then point_view).
 inline int point_sample(uint func, __global const float* P, __global const float* I,
                         __global const float* cam, float4 mat, __global const float* light,
@@ -377,12 +454,39 @@ inline Runs patch_runs(uint split, uint nu, uint nv) {
     return r;
 }
 
+// Quad coverage (PL_QUADS): a work-item draws the quads of a block of up to PL_QUAD_LINES strips
+// between neighbouring grid lines (lines as patch_runs orders them), for a run of up to PL_RUN
+// steps down them, keeping the last column of corners: each corner is evaluated once per block
+// and run, not four times. All nu_grid x nv_grid samples are corners (a wrapping axis's repeated
+// line closes the seam). GPUs (PL_RUN 1): one quad a work-item, its four corners evaluated.
+#ifndef PL_QUADS
+#define PL_QUADS 0
+#endif
+#define PL_QUAD_LINES (PL_RUN > 1u ? 4u : 1u)
+typedef struct { uint split, na, nb, blocks, runs, len; } QuadRuns;
+
+inline QuadRuns quad_runs(uint split, uint nu, uint nv) {
+    QuadRuns r;
+    r.split = PL_RUN > 1u ? split : 0u;
+    r.na = r.split == PL_SPLIT_V ? nv : nu;
+    r.nb = r.split == PL_SPLIT_V ? nu : nv;
+    r.blocks = (r.na - 1u + PL_QUAD_LINES - 1u) / PL_QUAD_LINES;   // side counts are >= 2
+    r.runs = (r.nb - 1u + PL_RUN - 1u) / PL_RUN;
+    r.len = (r.nb - 1u + r.runs - 1u) / r.runs;
+    return r;
+}
+
 inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
                          uint measure, uint max_side) {
     GridAxis gu, gv;
     patch_axes(rp, I, flags, factor, measure, max_side, &gu, &gv);
+#if PL_QUADS
+    QuadRuns q = quad_runs(split, gu.n, gv.n);
+    return (q.blocks * q.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
+#else
     Runs r = patch_runs(split, gu.n - gu.wrap, gv.n - gv.wrap);
     return (r.na * r.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
+#endif
 }
 
 // One work-item per patch: one 64-bit atomic gives the patch both its place in the schedule and
@@ -466,8 +570,47 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
 #if PL_VIEWS   // the views that see the patch (the LOD stage's render_views): the others are skipped
             ulong seen = view_masks[pid];
 #endif
-            Runs runs = patch_runs(pl_split(func), g.nu, g.nv);
             if (c == first && get_local_id(0) == 0 && g.capped) n_capped++;
+#if PL_QUADS
+            __global const float* cv = cam;   // one view (DirectPointRenderer refuses quads with several)
+            QuadRuns qr = quad_runs(pl_split(func), g.nu_grid, g.nv_grid);
+            for (; c < min(next, c_end); ++c) {
+                uint unit = (c - first) * POINTS_LOCAL + get_local_id(0);   // the patch's block and run
+                if (unit >= qr.blocks * qr.runs) continue;
+                uint a0 = unit % qr.blocks * PL_QUAD_LINES, lines = min(PL_QUAD_LINES, qr.na - 1u - a0) + 1u;
+                uint b0 = unit / qr.blocks * qr.len, b1 = min(b0 + qr.len, qr.nb - 1u);
+#if PL_RUN > 1
+                float C[PL_QUAD_LINES + 1u][PL_SPLIT_FLOATS];
+                for (uint k = 0u; k < lines; ++k) {
+                    if (qr.split == PL_SPLIT_U) pl_surface_axis(func, grid_at(g.u0, g.u1, g.nu_grid, g.nau, g.au, g.su, a0 + k), P, C[k]);
+                    if (qr.split == PL_SPLIT_V) pl_surface_axis(func, grid_at(g.v0, g.v1, g.nv_grid, g.nav, g.av, g.sv, a0 + k), P, C[k]);
+                }
+#endif
+                QuadVertex prev[PL_QUAD_LINES + 1u], cur[PL_QUAD_LINES + 1u];
+                for (uint ib = b0; ib <= b1; ++ib) {
+                    for (uint k = 0u; k < lines; ++k) {
+                        uint iu = qr.split == PL_SPLIT_V ? ib : a0 + k, iv = qr.split == PL_SPLIT_V ? a0 + k : ib;
+                        float us = grid_at(g.u0, g.u1, g.nu_grid, g.nau, g.au, g.su, iu);
+                        float vs = grid_at(g.v0, g.v1, g.nv_grid, g.nav, g.av, g.sv, iv);
+#if PL_RUN > 1
+                        cur[k] = quad_vertex(func, P, I, qr.split, C[k], us, vs, cv);
+#else
+                        cur[k] = quad_vertex(func, P, I, 0u, 0, us, vs, cv);
+#endif
+                        n_samples++;
+                        if (cur[k].state == SAMPLE_NAN) n_nan++;
+                    }
+                    for (uint k = 0u; ib > b0 && k + 1u < lines; ++k) {
+                        QuadVertex q00 = prev[k], q10 = prev[k + 1u], q01 = cur[k], q11 = cur[k + 1u];
+                        if (q00.state || q10.state || q01.state || q11.state) continue;   // a corner NaN or clipped
+                        n_atomics += cover_triangle(q00, q10, q11, cv, mat, light, object_id, color_buf, aux_buf);
+                        n_atomics += cover_triangle(q00, q11, q01, cv, mat, light, object_id, color_buf, aux_buf);
+                    }
+                    for (uint k = 0u; k < lines; ++k) prev[k] = cur[k];
+                }
+            }
+#else
+            Runs runs = patch_runs(pl_split(func), g.nu, g.nv);
             for (; c < min(next, c_end); ++c) {
                 uint unit = (c - first) * POINTS_LOCAL + get_local_id(0);   // the patch's run
                 if (unit >= runs.na * runs.runs) continue;   // the patch's last chunk is partly empty
@@ -539,6 +682,7 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     }
                 }
             }
+#endif
             place++;
         }
     }

@@ -17,6 +17,7 @@ from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, patch_wraps, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
+from paramlod.errors import SceneError
 from paramlod.function.programs import POLY_TRIG, build, sample_run
 
 LOCAL_SIZE = 64
@@ -80,7 +81,7 @@ class DirectPointRenderer:
         # function code is compiled once; OcclusionCuller takes its kernels whatever the frame's
         # kind); the other kinds are built when first drawn (program_for)
         self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions,
-                             self._kind_defines(False, False))
+                             self._kind_defines("pixel", False))
         # own kernel objects per list drawn in a frame (all patches, the two occlusion phases, the
         # hybrid tiers) and kind of frame: arguments are set only when they change (see enqueue)
         self._launches: dict = {}
@@ -95,16 +96,17 @@ class DirectPointRenderer:
         # work-groups share the samples evenly: about one resident wave on a GPU
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
 
-    def _kind_defines(self, centre: bool, views: bool) -> dict:
-        return {**self._defines, "PL_CENTRE": int(centre), "PL_VIEWS": int(views)}
+    def _kind_defines(self, coverage: str, views: bool) -> dict:
+        return {**self._defines, "PL_CENTRE": int(coverage == "centre"), "PL_QUADS": int(coverage == "quad"),
+                "PL_VIEWS": int(views)}
 
-    def program_for(self, centre: bool, views: bool):
-        """The program whose points_direct is compiled for pixel-centre coverage (``centre``) and
-        for several views a frame (``views``) or without them (points.cl PL_CENTRE, PL_VIEWS:
-        the GPU draws much faster without code it does not run)."""
-        if not (centre or views):
+    def program_for(self, coverage: str, views: bool):
+        """The program whose points_direct is compiled for ``coverage`` (PointSettings.coverage)
+        and for several views a frame (``views``) or without them (points.cl PL_CENTRE, PL_QUADS,
+        PL_VIEWS: the GPU draws much faster without code it does not run)."""
+        if coverage == "pixel" and not views:
             return self.program
-        return build(["common/keys.cl", "points/points.cl"], self._functions, self._kind_defines(centre, views))
+        return build(["common/keys.cl", "points/points.cl"], self._functions, self._kind_defines(coverage, views))
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
                 light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None,
@@ -120,6 +122,11 @@ class DirectPointRenderer:
         for view v, as LodStage.render_views; needed with several views) and whose frustum holds
         it (``keys.layers`` must be ``n_views``)."""
         settings.validate()
+        if settings.coverage == "quad" and n_views > 1:
+            raise SceneError(f"points coverage \"quad\" draws frames of one view, this one has {n_views}: "
+                             "use coverage \"centre\" or \"pixel\" for several views")
+        if settings.coverage == "quad" and self.record:
+            raise ValueError("points: the record hook records one pixel a sample, not quad coverage")
         if keys.layers != n_views:
             raise ValueError(f"points: {n_views} views need key buffers of {n_views} layers, got {keys.layers}")
         if view_masks is None:
@@ -142,7 +149,7 @@ class DirectPointRenderer:
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time
-        kind = (settings.coverage == "centre", n_views > 1)
+        kind = (settings.coverage, n_views > 1)
         k = self._launches.get((phase, tier, kind))
         if k is None:
             k = self._launches[(phase, tier, kind)] = _Launch(self.program_for(*kind))

@@ -28,7 +28,7 @@ SAMPLING = ("segment", "extent")
 # the direct variant's colouring (kernels/points/points.cl debug_material): the material, a colour
 # per render patch, a colour per LOD step, a colour per hybrid tier
 COLOR_BY = ("material", "patch", "level", "tier")
-COVERAGE = ("centre", "pixel")   # PointSettings.coverage
+COVERAGE = ("centre", "pixel", "quad")   # PointSettings.coverage
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
@@ -59,7 +59,9 @@ class PointSettings:
     # the direct variant's coverage: "pixel", a sample covers the pixel it lands in (the thesis's
     # rule: silhouettes grown by up to a pixel), or "centre", the pixels whose centres its grid
     # cell holds (silhouettes as a triangle's, but rare 1-pixel holes where the surface curves
-    # sharply; docs/points.md, "Pixel-centre coverage")
+    # sharply; docs/points.md, "Pixel-centre coverage"), or "quad", the pixels whose centres the
+    # quads between neighbouring samples hold (a mesh of the sample grid, rasterized: silhouettes
+    # as its polygon's, single-view frames only; docs/points.md, "Quad coverage")
     coverage: str = "pixel"
 
     def validate(self):
@@ -250,3 +252,37 @@ def cover_cells(x, y, ju, jv, lo, hi, size) -> np.ndarray:
                 bit = np.uint32(1 << ((dy + COVER_REACH) * (2 * COVER_REACH + 1) + dx + COVER_REACH))
                 bits |= np.where(inside, bit, np.uint32(0))
     return np.where(ok, bits, np.uint32(COVER_OWN)).astype(np.uint32)
+
+
+# --- quad coverage (PointSettings.coverage "quad") ----------------------------------------------
+def _edge(ax, ay, bx, by, qx, qy):
+    return (bx - ax) * (qy - ay) - (by - ay) * (qx - ax)
+
+
+def cover_triangle(a, b, c, size) -> tuple[np.ndarray, np.ndarray]:
+    """numpy twin of cover_triangle() in kernels/points/points.cl, float32 in the kernel's order,
+    for one triangle whose corners ``a``, ``b``, ``c`` are (x, y, depth) in pixels: the pixel
+    indices (y * W + x, ascending) whose centres it holds inside the image ``size`` (W, H), edges
+    included, either winding, none without area; and the float32 depth interpolated at each."""
+    f = np.float32
+    (ax, ay, ad), (bx, by, bd), (cx, cy, cd) = (np.asarray(p, f) for p in (a, b, c))
+    w, h = size
+    none = np.zeros(0, np.int64), np.zeros(0, f)
+    with np.errstate(all="ignore"):
+        area = _edge(ax, ay, bx, by, cx, cy)
+        if not area != 0:
+            return none
+        x0 = np.fmax(np.ceil(min(ax, bx, cx) - f(0.5)), f(0))
+        x1 = np.fmin(np.floor(max(ax, bx, cx) - f(0.5)), f(w) - f(1))
+        y0 = np.fmax(np.ceil(min(ay, by, cy) - f(0.5)), f(0))
+        y1 = np.fmin(np.floor(max(ay, by, cy) - f(0.5)), f(h) - f(1))
+        if not (x0 <= x1 and y0 <= y1):
+            return none
+        py, px = np.meshgrid(np.arange(y0, y1 + 1, dtype=f), np.arange(x0, x1 + 1, dtype=f), indexing="ij")
+        qx, qy = px + f(0.5), py + f(0.5)
+        wa, wb, wc = _edge(bx, by, cx, cy, qx, qy), _edge(cx, cy, ax, ay, qx, qy), _edge(ax, ay, bx, by, qx, qy)
+        inside = ((wa >= 0) & (wb >= 0) & (wc >= 0)) | ((wa <= 0) & (wb <= 0) & (wc <= 0))
+        inv = f(1) / area
+        depth = (wa * inv) * ad + (wb * inv) * bd + (wc * inv) * cd
+    pix = (py.astype(np.int64) * w + px.astype(np.int64))[inside]
+    return pix.reshape(-1), depth[inside].astype(f).reshape(-1)

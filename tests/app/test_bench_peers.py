@@ -134,7 +134,7 @@ def test_a_real_paramlod_row(tmp_path):
     result = P.run_peers(_args("--peers-tools", "paramlod", "--peers-scenes", "torus", "--peers-size", "64x64",
                                "--peers-frames", "1", "--peers-samples"), tmp_path, log=lambda m: None)
     rows = {r["variant"]: r for r in result["render"]}
-    assert set(rows) == {"points", "points-centre", "tess", "tess-grid", "tess-chord"}
+    assert set(rows) == {"points", "points-centre", "points-quad", "tess", "tess-grid", "tess-chord"}
     assert result["references"]["torus"]["vertices"] > 10_000
     for r in rows.values():
         assert r["tool"] == "paramlod" and r["scene"] == "torus" and r["ms"] > 0

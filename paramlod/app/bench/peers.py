@@ -297,9 +297,10 @@ def reference_silhouette(spec: dict, field=None) -> tuple[np.ndarray, dict]:
 
 # --- paramlod ------------------------------------------------------------------------------------------
 # paramlod's rows -> their renderer: its variants and bench variants with their own settings
-# (paramlod.app.bench.scenes.VARIANT_SETTINGS: the points with pixel-centre coverage, tess with the
+# (paramlod.app.bench.scenes.VARIANT_SETTINGS: the points with pixel-centre and quad coverage, tess with the
 # grid tessellator, tess with chord levels)
-PARAMLOD_ROWS = {"points": "points", "points-centre": "points", "tess": "tess", "tess-grid": "tess", "tess-chord": "tess"}
+PARAMLOD_ROWS = {"points": "points", "points-centre": "points", "points-quad": "points", "tess": "tess",
+                 "tess-grid": "tess", "tess-chord": "tess"}
 
 
 def paramlod_render_row(spec: dict, variant: str, frames: int, warmup: int = 1, field=None,

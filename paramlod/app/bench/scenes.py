@@ -15,6 +15,8 @@ from paramlod.scene.scene import Material, Scene
 # bench variants drawn with other settings than their renderer's defaults: (settings part, field) -> value
 VARIANT_SETTINGS = {
     "points-centre": {("points", "coverage"): "centre"},                   # docs/points.md, "Pixel-centre coverage"
+    # docs/points.md, "Quad coverage": quads are exact however far apart their corners, so half the density
+    "points-quad": {("points", "coverage"): "quad", ("points", "density"): 0.75},
     "tess-grid": {("tess", "tessellator"): "grid"},                         # docs/tessellation.md, "The grid tessellator"
     "tess-chord": {("tess", "mode"): "chord", ("tess", "l_min"): 1.0},      # docs/tessellation.md, "Tessellation levels"
     "tess-segment": {("tess", "inner_measure"): "segment"},                 # docs/tessellation.md, "Tessellation levels"
