@@ -91,12 +91,13 @@ def test_small_glyph_silhouettes_are_the_surfaces(order):
 
 @pytest.mark.parametrize("name,eye", [("torus", (0.3, 1.9, 1.4)), ("sphere", (0.0, 0.4, 2.4)),
                                       ("torus", (1.2, 0.6, 0.9))])
-def test_centre_coverage_leaves_no_holes(name, eye):
+@pytest.mark.parametrize("coverage", ["centre", "quad"])   # quad: tests/renderers/test_points_quads.py
+def test_centre_and_quad_coverage_leave_no_holes(name, eye, coverage):
     scene = pl.Scene()
     scene.add(name)
     cam = pl.Camera.look_at(eye, (0, 0, 0), size=(128, 112))
     rs = pl.RenderSettings()
-    rs.points.coverage = "centre"
+    rs.points.coverage = coverage
     frame = pl.render(scene, cam, "points", rs)
     mask, dmax, _, _ = dense_silhouette(get_function(name), cam)
     assert mask.sum() > 2000

@@ -2,14 +2,13 @@
 quad_vertex, cover_triangle): the quads between neighbouring samples of a patch's grid cover the
 pixels whose centres they hold, as a rasterizer covers a mesh of the sample grid. The triangle
 test against its numpy twin (paramlod.renderers.sampling.cover_triangle), bit for bit, and what it
-does to silhouettes and holes."""
+does to silhouettes (its holes: test_points_coverage.py, with centre coverage's)."""
 import numpy as np
 import pyopencl as cl
 import pytest
 
 import paramlod as pl
 from conftest import sphere_disc
-from helpers.holes import count_holes, dense_silhouette
 from helpers.silhouettes import glyph_case, iou_of, settings_for
 from paramlod import kernels
 from paramlod.core.layouts import camera_record, cl_prelude
@@ -100,20 +99,6 @@ def test_triangle_cover_equals_its_twin():
     sizes = np.array(sizes)
     # none, a few and many centres, and triangles that cover the whole image
     assert (sizes == 0).mean() > 0.2 and ((sizes > 0) & (sizes < 5)).mean() > 0.1 and (sizes == w * h).any()
-
-
-@pytest.mark.parametrize("name,eye", [("torus", (0.3, 1.9, 1.4)), ("sphere", (0.0, 0.4, 2.4)),
-                                      ("torus", (1.2, 0.6, 0.9))])
-def test_quad_coverage_leaves_no_holes(name, eye):
-    scene = pl.Scene()
-    scene.add(name)
-    cam = pl.Camera.look_at(eye, (0, 0, 0), size=(128, 112))
-    rs = pl.RenderSettings()
-    rs.points.coverage = "quad"
-    frame = pl.render(scene, cam, "points", rs)
-    mask, dmax, _, _ = dense_silhouette(get_function(name), cam)
-    assert mask.sum() > 2000
-    assert count_holes(frame, mask, dmax, tol=0.02 * float(np.linalg.norm(eye))) == 0
 
 
 def test_quads_draw_the_sphere_disc_exactly():
