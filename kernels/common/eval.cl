@@ -78,3 +78,24 @@ __kernel void eval_split_throughput(uint func, float a0, float da, float b0, flo
     }
     if (i < na) out[get_global_id(1) * na + i] = sum;
 }
+
+#ifdef PL_VECTOR
+// The vector code (pl_vsurface_rest, paramlod.function.codegen_vector) on PL_VW samples a
+// work-item: uv holds 2 PL_VW floats a group (u then v per lane), whose lanes share the split's
+// axis coordinate (the carried values are lane 0's, as points.cl's quad runs share a grid line).
+// out: 9 floats a sample, position and partials. Twin: pl_surface (eval_samples above).
+__kernel void eval_vector(uint func, __global const float* uv, uint n_groups,
+                          __global const float* params, __global float* out)
+{
+    uint g = get_global_id(0);
+    if (g >= n_groups) return;
+    plv u = pl_vload(0, uv + 2 * PL_VW * g), v = pl_vload(0, uv + 2 * PL_VW * g + PL_VW);
+    float C[PL_SPLIT_FLOATS];
+    uint split = pl_split(func);
+    if (split) pl_surface_axis(func, split == PL_SPLIT_U ? u.s0 : v.s0, params, C);
+    plv o[9];
+    pl_vsurface_rest(func, u, v, params, C, o);
+    for (int k = 0; k < 9; ++k)
+        for (int lane = 0; lane < PL_VW; ++lane) out[(PL_VW * g + lane) * 9 + k] = o[k][lane];
+}
+#endif

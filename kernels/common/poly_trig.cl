@@ -35,6 +35,26 @@ inline float PL_OVERLOAD pl_poly_sin(float x) { float c; return pl_poly_sincos(x
 
 inline float PL_OVERLOAD pl_poly_cos(float x) { float c; pl_poly_sincos(x, &c); return c; }
 
+// PL_VW lanes (paramlod.function.codegen_vector): the same arithmetic per lane, the quadrant
+// chosen by select; a vector with a lane beyond the limit takes the builtin in every lane
+inline float8 PL_OVERLOAD pl_poly_sincos(float8 x, float8* c) {
+    if (any(x > PL_TRIG_LIMIT || x < -PL_TRIG_LIMIT)) return sincos(x, c);
+    int8 q = convert_int8(x * 0.636619772367581343f + select((float8)0.5f, (float8)-0.5f, x < 0.0f));
+    float8 j = convert_float8(q);
+    float8 r = ((x - j * 1.5703125f) - j * 4.837512969970703125e-4f) - j * 7.54978995489188216e-8f;
+    float8 z = r * r;
+    float8 s = ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * r + r;
+    float8 k = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) * z * z
+               - 0.5f * z + 1.0f;
+    int8 quadrant = q & 3;
+    *c = select(select(select(s, -k, quadrant == 2), -s, quadrant == 1), k, quadrant == 0);
+    return select(select(select(-k, -s, quadrant == 2), k, quadrant == 1), s, quadrant == 0);
+}
+
+inline float8 PL_OVERLOAD pl_poly_sin(float8 x) { float8 c; return pl_poly_sincos(x, &c); }
+
+inline float8 PL_OVERLOAD pl_poly_cos(float8 x) { float8 c; pl_poly_sincos(x, &c); return c; }
+
 // vectors (snippets may take the sine of a vec2 or vec3): the builtins
 #define PL_TRIG_VECTOR(T) \
     inline T PL_OVERLOAD pl_poly_sincos(T x, T* c) { return sincos(x, c); } \

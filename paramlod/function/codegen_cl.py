@@ -42,6 +42,7 @@ class CLPrinter(C99CodePrinter):
         "atan2": "atan2", "floor": "floor", "ceil": "ceil", "sign": "sign", "pow": "pow", "sqrt": "sqrt",
     }
     float_suffix = "f"
+    local_type = "float"         # type of generated temporaries (a sincos's cosine is declared apart)
     local_decl = "const float"   # declaration of generated temporaries
     bool_decl = "const int"      # ... of temporaries that hold a condition (GLSL: "const bool")
     param_read = "P[{}]"         # expression that reads float k of the parameter block
@@ -52,6 +53,9 @@ class CLPrinter(C99CodePrinter):
 
     def _lit(self, x: float) -> str:
         return f"{float(x)!r}{self.float_suffix}"
+
+    def _int(self, n: int) -> str:   # an integer argument (pown's exponent)
+        return str(n)
 
     def _print_Float(self, expr):
         return self._lit(expr)
@@ -75,7 +79,7 @@ class CLPrinter(C99CodePrinter):
             n = int(ex)
             if n == 0:
                 return self._lit(1.0)
-            mag = "*".join([b] * abs(n)) if abs(n) <= 4 else f"{n_['pown']}({self._print(base)}, {abs(n)})"
+            mag = "*".join([b] * abs(n)) if abs(n) <= 4 else f"{n_['pown']}({self._print(base)}, {self._int(abs(n))})"
             return f"({mag})" if n > 0 else f"({self._lit(1.0)}/({mag}))"
         if ex == sp.Rational(1, 2):
             return f"{n_['sqrt']}({self._print(base)})"
@@ -335,7 +339,7 @@ def step_lines(fn: ParametricFunction, steps, printer: CLPrinter = _printer) -> 
     lines = []
     for step in steps:
         if isinstance(step, SinCos):
-            lines.append(f"    float {step.c};")
+            lines.append(f"    {printer.local_type} {step.c};")
             lines.append(f"    {printer.local_decl} {step.s} = sincos({_print_checked(printer, step.arg, fn)}, &{step.c});")
         else:
             sym, e = step

@@ -18,7 +18,7 @@ from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, pa
 from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
 from paramlod.errors import SceneError
-from paramlod.function.programs import POLY_TRIG, build, sample_run
+from paramlod.function.programs import POLY_TRIG, VECTOR, build, sample_run
 
 LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
@@ -69,6 +69,10 @@ class _Launch:
 
 
 class DirectPointRenderer:
+    # CPU devices: quad corners evaluated on vector lanes (points.cl quad_vertices); False, one
+    # corner at a time (quad_vertex), as GPUs do: the tests' reference for the vector path
+    vector_corners = True
+
     def __init__(self, functions, record: bool = False):
         defines = {"PL_RECORD": 1} if record else {}
         if cl_device().is_gpu:   # sum the counters per work-group (see the end of points_direct)
@@ -97,8 +101,11 @@ class DirectPointRenderer:
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
 
     def _kind_defines(self, coverage: str, views: bool) -> dict:
-        return {**self._defines, "PL_CENTRE": int(coverage == "centre"), "PL_QUADS": int(coverage == "quad"),
-                "PL_VIEWS": int(views)}
+        defines = {**self._defines, "PL_CENTRE": int(coverage == "centre"), "PL_QUADS": int(coverage == "quad"),
+                   "PL_VIEWS": int(views)}
+        if coverage == "quad" and self._defines["PL_RUN"] > 1 and self.vector_corners:
+            defines[VECTOR] = 1
+        return defines
 
     def program_for(self, coverage: str, views: bool):
         """The program whose points_direct is compiled for ``coverage`` (PointSettings.coverage)

@@ -58,3 +58,39 @@ def test_beyond_the_reduction_and_non_finite_take_the_builtin():
     assert np.array_equal(out[:, 0], out[:, 4], equal_nan=True)   # the builtin's very values
     assert np.array_equal(out[:, 1], out[:, 5], equal_nan=True)
     assert np.all(np.isnan(out[-3:, :2]))
+
+
+VECTOR_SOURCE = _with_trig("""
+inline float8 generated8(float8 x, float8* c) { return sincos(x, c); }
+inline float generated1(float x, float* c) { return sincos(x, c); }
+""", {POLY_TRIG: 1}) + """
+__kernel void probe8(__global const float* x, __global float* out) {
+    uint i = get_global_id(0);
+    float8 c8;
+    float8 s8 = generated8(vload8(i, x), &c8);
+    vstore8(s8, 4 * i, out); vstore8(c8, 4 * i + 1, out);
+    for (int k = 0; k < 8; ++k) { float c; out[32 * i + 16 + k] = generated1(x[8 * i + k], &c); out[32 * i + 24 + k] = c; }
+}
+"""
+
+
+def test_vector_lanes_equal_the_scalar_inline_forms():
+    """The generated code on vector lanes (paramlod.function.codegen_vector) takes the float8
+    sincos: lane for lane the scalar inline form's bits; a vector with a lane beyond the
+    reduction takes the builtin in every lane."""
+    dev = cl_device()
+    mf = cl.mem_flags
+    rng = np.random.default_rng(11)
+    x = np.concatenate([rng.uniform(-8192, 8192, 80_000), rng.uniform(-7, 7, 80_000),
+                        np.float32([np.nan, 0.0, -0.0, 1e-30, 3.0, 1.5707964, -1.5707964, 8192.0])]).astype(np.float32)
+    xb = cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x)
+    ob = cl.Buffer(dev.context, mf.WRITE_ONLY, 4 * x.nbytes)
+    cl.Program(dev.context, VECTOR_SOURCE).build().probe8(dev.queue, (len(x) // 8,), None, xb, ob)
+    out = np.empty((len(x) // 8, 4, 8), np.float32)
+    cl.enqueue_copy(dev.queue, out, ob)
+    assert np.array_equal(out[:, 0], out[:, 2], equal_nan=True) and np.array_equal(out[:, 1], out[:, 3], equal_nan=True)
+    far = np.float32([1.0, 2.0, 3.0, 9000.0, 4.0, 5.0, 6.0, 7.0])   # one lane beyond: the builtin in all
+    fb = cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=far)
+    cl.Program(dev.context, VECTOR_SOURCE).build().probe8(dev.queue, (1,), None, fb, ob)
+    cl.enqueue_copy(dev.queue, out[:1], ob)
+    assert np.max(np.abs(out[0, 0] - np.sin(far.astype(np.float64)))) <= 2 * 2.0 ** -23
