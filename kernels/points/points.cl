@@ -344,22 +344,65 @@ inline QuadVertex quad_vertex(uint func, __global const float* P, __global const
 }
 
 #ifdef PL_VECTOR
-// quad_vertex on PL_VW corners of one grid line at once (pl_vsurface_rest, the generated code on
-// vector lanes: paramlod.function.codegen_vector); the line's carried values C are shared. The
-// first n lanes are stored in out[0..n).
-inline void quad_vertices(uint func, __global const float* P, __global const float* I, const float* C,
-                          plv u, plv v, __global const float* cam, uint n, QuadVertex* out) {
+// point_eval_partials on PL_VW samples of one grid line at once (pl_vsurface_rest, the generated
+// code on vector lanes: paramlod.function.codegen_vector; the line's carried values C are
+// shared): world position, normal direction and partials after the instance transform, and which
+// lanes are NaN or infinite, as vectors. The same arithmetic as the scalar forms, lane for lane.
+typedef struct { plv wx, wy, wz, nx, ny, nz, ux, uy, uz, vx, vy, vz; plvi bad; } SurfaceLanes;
+
+inline SurfaceLanes surface_lanes(uint func, __global const float* P, __global const float* I, const float* C,
+                                  plv u, plv v) {
+#pragma OPENCL FP_CONTRACT OFF
     plv o[9];
     pl_vsurface_rest(func, u, v, P, C, o);
-    plvi bad = isnan(o[0]) | isnan(o[1]) | isnan(o[2]) | isinf(o[0]) | isinf(o[1]) | isinf(o[2]);
+    SurfaceLanes s;
+    s.bad = isnan(o[0]) | isnan(o[1]) | isnan(o[2]) | isinf(o[0]) | isinf(o[1]) | isinf(o[2]);
     __global const float* M = I + INST_MODEL;
-    plv wx = M[0] * o[0] + M[1] * o[1] + M[2] * o[2] + M[3];
-    plv wy = M[4] * o[0] + M[5] * o[1] + M[6] * o[2] + M[7];
-    plv wz = M[8] * o[0] + M[9] * o[1] + M[10] * o[2] + M[11];
+    s.wx = M[0] * o[0] + M[1] * o[1] + M[2] * o[2] + M[3];
+    s.wy = M[4] * o[0] + M[5] * o[1] + M[6] * o[2] + M[7];
+    s.wz = M[8] * o[0] + M[9] * o[1] + M[10] * o[2] + M[11];
     plv cx = o[4] * o[8] - o[5] * o[7], cy = o[5] * o[6] - o[3] * o[8], cz = o[3] * o[7] - o[4] * o[6];
     __global const float* N = I + INST_NORMAL;
-    plv nx = N[0] * cx + N[1] * cy + N[2] * cz, ny = N[4] * cx + N[5] * cy + N[6] * cz;
-    plv nz = N[8] * cx + N[9] * cy + N[10] * cz;
+    s.nx = N[0] * cx + N[1] * cy + N[2] * cz; s.ny = N[4] * cx + N[5] * cy + N[6] * cz;
+    s.nz = N[8] * cx + N[9] * cy + N[10] * cz;
+    s.ux = M[0] * o[3] + M[1] * o[4] + M[2] * o[5]; s.uy = M[4] * o[3] + M[5] * o[4] + M[6] * o[5];
+    s.uz = M[8] * o[3] + M[9] * o[4] + M[10] * o[5];
+    s.vx = M[0] * o[6] + M[1] * o[7] + M[2] * o[8]; s.vy = M[4] * o[6] + M[5] * o[7] + M[6] * o[8];
+    s.vz = M[8] * o[6] + M[9] * o[7] + M[10] * o[8];
+    return s;
+}
+
+// (u, v) of PL_VW samples down one grid line of g (a run: patch_runs, quad_runs): the line at
+// parameter `a` across the split's axis (u, or v for a split along v), samples ib .. ib + PL_VW - 1
+// of the nu x nv grid along it, lanes past `last` repeating sample `last`; as grid_at gives them.
+inline void line_lanes(PointGrid g, uint split, uint nu, uint nv, float a, uint ib, uint last, plv* u, plv* v) {
+    float b[PL_VW];
+    for (uint l = 0u; l < PL_VW; ++l) {
+        uint i = min(ib + l, last);
+        b[l] = split == PL_SPLIT_V ? grid_at(g.u0, g.u1, nu, g.nau, g.au, g.su, i) : grid_at(g.v0, g.v1, nv, g.nav, g.av, g.sv, i);
+    }
+    plv bv = pl_vload(0, b);
+    *u = split == PL_SPLIT_V ? bv : (plv)a;
+    *v = split == PL_SPLIT_V ? (plv)a : bv;
+}
+
+// Lane l of surface_lanes as point_eval_partials gives it.
+inline int lane_eval(const SurfaceLanes* s, uint l, float3* world, float3* n_obj, float3* tu, float3* tv) {
+    if (s->bad[l]) return SAMPLE_NAN;
+    *world = (float3)(s->wx[l], s->wy[l], s->wz[l]);
+    *n_obj = (float3)(s->nx[l], s->ny[l], s->nz[l]);
+    *tu = (float3)(s->ux[l], s->uy[l], s->uz[l]);
+    *tv = (float3)(s->vx[l], s->vy[l], s->vz[l]);
+    return SAMPLE_DRAWN;
+}
+
+// quad_vertex on PL_VW corners of one grid line at once (surface_lanes); the first n lanes are
+// stored in out[0..n).
+inline void quad_vertices(uint func, __global const float* P, __global const float* I, const float* C,
+                          plv u, plv v, __global const float* cam, uint n, QuadVertex* out) {
+    SurfaceLanes s = surface_lanes(func, P, I, C, u, v);
+    plv wx = s.wx, wy = s.wy, wz = s.wz, nx = s.nx, ny = s.ny, nz = s.nz;
+    plvi bad = s.bad;
     __global const float* V = cam + CAM_VIEW;
     plv ex = V[0] * wx + V[1] * wy + V[2] * wz + V[3], ey = V[4] * wx + V[5] * wy + V[6] * wz + V[7];
     plv ez = V[8] * wx + V[9] * wy + V[10] * wz + V[11];
@@ -643,15 +686,9 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     float a = qr.split == PL_SPLIT_V ? grid_at(g.v0, g.v1, g.nv_grid, g.nav, g.av, g.sv, a0 + k)
                                                      : grid_at(g.u0, g.u1, g.nu_grid, g.nau, g.au, g.su, a0 + k);
                     for (uint j0 = 0u; j0 < nb; j0 += PL_VW) {
-                        float bs[PL_VW];
-                        for (uint l = 0u; l < PL_VW; ++l) {   // lanes past the run repeat its last corner
-                            uint ib = b0 + min(j0 + l, nb - 1u);
-                            bs[l] = qr.split == PL_SPLIT_V ? grid_at(g.u0, g.u1, g.nu_grid, g.nau, g.au, g.su, ib)
-                                                           : grid_at(g.v0, g.v1, g.nv_grid, g.nav, g.av, g.sv, ib);
-                        }
-                        plv b = pl_vload(0, bs);
-                        quad_vertices(func, P, I, C[k], qr.split == PL_SPLIT_V ? b : (plv)a,
-                                      qr.split == PL_SPLIT_V ? (plv)a : b, cv, min((uint)PL_VW, nb - j0), &qv[k][j0]);
+                        plv u, v;
+                        line_lanes(g, qr.split, g.nu_grid, g.nv_grid, a, b0 + j0, b1, &u, &v);
+                        quad_vertices(func, P, I, C[k], u, v, cv, min((uint)PL_VW, nb - j0), &qv[k][j0]);
                     }
                     for (uint j = 0u; j < nb; ++j) n_nan += qv[k][j].state == SAMPLE_NAN;
                 }
@@ -700,6 +737,11 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                 float C[PL_SPLIT_FLOATS];
                 if (runs.split == PL_SPLIT_U) pl_surface_axis(func, grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, ia), P, C);
                 if (runs.split == PL_SPLIT_V) pl_surface_axis(func, grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, ia), P, C);
+#ifdef PL_VECTOR   // CPUs: the run's samples evaluated PL_VW at a time (surface_lanes)
+                float a_line = runs.split == PL_SPLIT_V ? grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, ia)
+                                                        : grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, ia);
+                SurfaceLanes lanes;
+#endif
                 for (uint ib = ib0; ib < ib1; ++ib) {
 #else   // GPUs: one sample, no private array and no loop (with them the H200's frames were 5-15 % slower)
                 const float* C = 0;
@@ -711,8 +753,18 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     float3 world, n_obj, tu, tv;
                     float us = grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, iu);
                     float vs = grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, iv);
+#ifdef PL_VECTOR
+                    uint lane = (ib - ib0) % PL_VW;
+                    if (lane == 0u) {
+                        plv u, v;
+                        line_lanes(g, runs.split, g.nu, g.nv, a_line, ib, ib1 - 1u, &u, &v);
+                        lanes = surface_lanes(func, P, I, C, u, v);
+                    }
+                    int r = lane_eval(&lanes, lane, &world, &n_obj, &tu, &tv);
+#else
                     int r = PL_CENTRE ? point_eval_partials(func, P, I, runs.split, C, us, vs, &world, &n_obj, &tu, &tv)
                                    : point_eval(func, P, I, runs.split, C, us, vs, &world, &n_obj);
+#endif
                     n_samples++;
 #ifdef PL_RECORD
                     rec_pix[rec_offset[pid] + j] = 0xFFFFFFFFu;

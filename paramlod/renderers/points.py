@@ -69,9 +69,9 @@ class _Launch:
 
 
 class DirectPointRenderer:
-    # CPU devices: quad corners evaluated on vector lanes (points.cl quad_vertices); False, one
-    # corner at a time (quad_vertex), as GPUs do: the tests' reference for the vector path
-    vector_corners = True
+    # CPU devices: a run's samples (or quad corners) evaluated on vector lanes (points.cl
+    # surface_lanes); False, one at a time, as GPUs do: the tests' reference for the vector path
+    vector_lanes = True
 
     def __init__(self, functions, record: bool = False):
         defines = {"PL_RECORD": 1} if record else {}
@@ -103,7 +103,7 @@ class DirectPointRenderer:
     def _kind_defines(self, coverage: str, views: bool) -> dict:
         defines = {**self._defines, "PL_CENTRE": int(coverage == "centre"), "PL_QUADS": int(coverage == "quad"),
                    "PL_VIEWS": int(views)}
-        if coverage == "quad" and self._defines["PL_RUN"] > 1 and self.vector_corners:
+        if self._defines["PL_RUN"] > 1 and self.vector_lanes:   # CPUs: samples on vector lanes (points.cl surface_lanes)
             defines[VECTOR] = 1
         return defines
 

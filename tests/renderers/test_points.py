@@ -7,6 +7,8 @@ import pytest
 import sympy as sp
 
 import paramlod as pl
+from paramlod.app.bench import peers
+from paramlod.app.bench.scenes import apply_variant_settings
 from paramlod.core.layouts import cl_prelude
 from paramlod.device.context import cl_device
 from paramlod.function import programs as function_programs
@@ -192,3 +194,26 @@ def test_srgb_encoding_table_rounds_the_srgb_curve():
     code = np.searchsorted(t, x, side="right") - 1
     away = np.min(np.abs(x[:, None] - t[None, 1:]), axis=1) > 1e-6
     np.testing.assert_array_equal(code[away], exact[away])
+
+
+@pytest.mark.parametrize("scene_name", ["glyphs8", "torus"])
+@pytest.mark.parametrize("variant", ["points", "points-centre", "points-quad"])
+def test_vector_lanes_draw_the_frames_of_one_sample_at_a_time(scene_name, variant, monkeypatch):
+    """CPU devices evaluate a run's samples, or a quad run's corners, on vector lanes
+    (paramlod.function.codegen_vector, points.cl surface_lanes): the same samples, so the same
+    frame as one at a time, bit for bit, with every coverage, on a glyph field (a split along u)
+    and the torus (no split). (GPUs evaluate one at a time either way.)"""
+    spec = peers.scene_spec(scene_name, (96, 96), grid=3)
+    field = peers.glyph_field(spec["order"], spec["grid"]) if spec["kind"] == "glyphs" else None
+    cam = peers.camera_of(spec)
+    rs = pl.RenderSettings()
+    apply_variant_settings(rs, variant)
+    frames = []
+    for vector in (True, False):
+        monkeypatch.setattr(DirectPointRenderer, "vector_lanes", vector)
+        frame = pl.render(peers.paramlod_scene(spec, field), cam, "points", rs)   # a new scene: its own programs
+        assert frame.coverage.mean() > 0.05
+        frames.append((frame.rgb8(), frame.depth, frame.stats["samples"]))
+    assert frames[0][2] == frames[1][2] > 0
+    assert np.array_equal(frames[0][0], frames[1][0]) and np.array_equal(frames[0][1], frames[1][1])
+

@@ -11,15 +11,12 @@ import paramlod as pl
 from conftest import sphere_disc
 from helpers.silhouettes import glyph_case, iou_of, settings_for
 from paramlod import kernels
-from paramlod.app.bench import peers
-from paramlod.app.bench.scenes import apply_variant_settings
 from paramlod.core.layouts import camera_record, cl_prelude
 from paramlod.core.shading import LIGHT
 from paramlod.device.context import cl_device
 from paramlod.errors import SceneError
 from paramlod.function.codegen_cl import cl_dispatch_source
 from paramlod.function.registry import get_function
-from paramlod.renderers.points import DirectPointRenderer
 from paramlod.renderers.sampling import cover_triangle
 
 PROBE = """
@@ -139,23 +136,3 @@ def test_quads_refuse_several_views():
     rs.points.coverage = "quad"
     with pytest.raises(SceneError, match="quad.*one view"):
         pl.render_views(scene, cams, "points", rs)
-
-
-@pytest.mark.parametrize("scene_name", ["glyphs8", "torus"])
-def test_quads_with_vector_corners_are_the_frames_of_scalar_corners(scene_name, monkeypatch):
-    """CPU devices evaluate a run's corners on vector lanes (paramlod.function.codegen_vector): the
-    same corners, so the same frame as one corner at a time, bit for bit, on a glyph field (split
-    along u) and the torus (no split)."""
-    spec = peers.scene_spec(scene_name, (96, 96), grid=3)
-    field = peers.glyph_field(spec["order"], spec["grid"]) if spec["kind"] == "glyphs" else None
-    scene, cam = peers.paramlod_scene(spec, field), peers.camera_of(spec)
-    rs = pl.RenderSettings()
-    apply_variant_settings(rs, "points-quad")
-    frames = []
-    for vector in (True, False):
-        monkeypatch.setattr(DirectPointRenderer, "vector_corners", vector)
-        frame = pl.render(scene, cam, "points", rs)
-        assert frame.coverage.mean() > 0.05
-        frames.append((frame.rgb8(), frame.stats["samples"]))
-    assert frames[0][1] == frames[1][1] > 0
-    assert np.array_equal(frames[0][0], frames[1][0])
