@@ -71,6 +71,12 @@ def test_matched_error_picks_the_closest_resolution_and_the_time_ratio():
     assert len(m) == 1
     assert m[0]["resolution"] == 64 and m[0]["peer"] == "pyvista" and m[0]["scene"] == "torus"
     assert m[0]["ratio"] == pytest.approx(0.8)
+    # between mesh 32 (0.07, 4 ms) and mesh 64 (0.04, 8 ms), straight in logs: 8 * 0.5 ** (ln(5/4) / ln(7/4))
+    assert m[0]["peer_ms_at_error"] == pytest.approx(8.0 * 0.5 ** (math.log(1.25) / math.log(1.75)))
+    assert m[0]["ratio_at_error"] == pytest.approx(m[0]["peer_ms_at_error"] / 10.0)
+    # outside the peer's errors, or at error 0: no interpolation
+    assert P.peer_ms_at(rows[2:6], 0.5) is None and P.peer_ms_at(rows[2:6], 0.005) is None
+    assert P.peer_ms_at(rows[2:6], 0.0) is None and P.peer_ms_at(rows[2:6], 0.04) == pytest.approx(8.0)
 
 
 def test_evenness_of_a_hexagonal_lattice_is_one():
@@ -125,7 +131,7 @@ def test_markdown_has_time_and_error_side_by_side():
     md = P.format_peers_markdown(result)
     assert "| torus | paramlod | 0.1.0 | points | 12.3 | 0.046 |" in md
     assert "| torus | pyvista | pyvista 0.49.2 / vtk 9.7.2 | mesh 64 | 3.2 | 0.040 |" in md
-    assert "| torus | points | 12.3 | 0.046 | pyvista | 64 | 3.2 | 0.040 | 0.26 |" in md
+    assert "| torus | points | 12.3 | 0.046 | pyvista | 64 | 3.2 | 0.040 | 0.26 | - | - |" in md   # one peer row: no front
     assert "| open3d | open3d 0.20.0 | 10,000 | 10,000 | 0.50 | 0.74 | 0.077 | 0.10 | 0.500 |" in md
     assert "fury: not installed (pip install fury==2.0.0)" in md and "pymeshlab: timed out after 900 s" in md
 
@@ -134,7 +140,7 @@ def test_a_real_paramlod_row(tmp_path):
     result = P.run_peers(_args("--peers-tools", "paramlod", "--peers-scenes", "torus", "--peers-size", "64x64",
                                "--peers-frames", "1", "--peers-samples"), tmp_path, log=lambda m: None)
     rows = {r["variant"]: r for r in result["render"]}
-    assert set(rows) == {"points", "points-centre", "points-quad", "tess", "tess-grid", "tess-chord"}
+    assert set(rows) == {"points", "points-centre", "points-quad", "points-quad-fine", "tess", "tess-grid", "tess-chord"}
     assert result["references"]["torus"]["vertices"] > 10_000
     for r in rows.values():
         assert r["tool"] == "paramlod" and r["scene"] == "torus" and r["ms"] > 0

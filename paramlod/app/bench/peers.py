@@ -1,14 +1,15 @@
 """``paramlod bench --peers``: paramlod against the tools its users would use instead, in one run.
 
-Rendering (paramlod's rows, PARAMLOD_ROWS: points, also with pixel-centre coverage, and tess, also
-with the grid tessellator and with chord levels, against pyvista/VTK and FURY 2/pygfx, each peer
+Rendering (paramlod's rows, PARAMLOD_ROWS: points, also with pixel-centre and quad coverage, and
+tess, also with the grid tessellator and with chord levels, against pyvista/VTK and FURY 2/pygfx, each peer
 drawing the same surface as a fixed triangle mesh at several resolutions): the 20x20 order-8 and
 order-12 SH glyph fields and the torus, framed and close up. Every row has its warm median time per
 frame (render and read the image back to the host) and its silhouette error, 1 - IoU of its coverage
 mask against a reference silhouette computed once per scene: the analytic surface tessellated until
 its triangles are below a pixel on screen, rasterized at pixel centres in numpy, with the same
 camera and size. The "matched error" view gives, per peer, the mesh resolution whose error is
-closest to paramlod's and the time ratio there.
+closest to paramlod's and the time ratio there, and the peer's time interpolated at paramlod's
+error between the two resolutions around it (``peer_ms_at``) with that ratio.
 
 Sampling (paramlod blue surfels against Open3D and pymeshlab Poisson-disk) of the Stanford bunny at
 10k and 100k points: seconds, and evenness (nearest-neighbour distance min / mean / CV, normalised
@@ -297,10 +298,10 @@ def reference_silhouette(spec: dict, field=None) -> tuple[np.ndarray, dict]:
 
 # --- paramlod ------------------------------------------------------------------------------------------
 # paramlod's rows -> their renderer: its variants and bench variants with their own settings
-# (paramlod.app.bench.scenes.VARIANT_SETTINGS: the points with pixel-centre and quad coverage, tess with the
-# grid tessellator, tess with chord levels)
-PARAMLOD_ROWS = {"points": "points", "points-centre": "points", "points-quad": "points", "tess": "tess",
-                 "tess-grid": "tess", "tess-chord": "tess"}
+# (paramlod.app.bench.scenes.VARIANT_SETTINGS: the points with pixel-centre and quad coverage, the quads with
+# the LOD's finer detail split, tess with the grid tessellator, tess with chord levels)
+PARAMLOD_ROWS = {"points": "points", "points-centre": "points", "points-quad": "points", "points-quad-fine": "points",
+                 "tess": "tess", "tess-grid": "tess", "tess-chord": "tess"}
 
 
 def paramlod_render_row(spec: dict, variant: str, frames: int, warmup: int = 1, field=None,
@@ -530,9 +531,25 @@ def paramlod_sample(mesh_path: str, n: int, views: int = 16, resolution: int | N
 
 
 # --- the run -------------------------------------------------------------------------------------------
+def peer_ms_at(cands: list, error: float) -> float | None:
+    """A peer's time at silhouette error ``error``: between the two of its rows (``cands``) whose
+    errors bracket it, straight in log time against log error (its time/error front); None outside
+    their range or at error 0 (nothing to interpolate in logs)."""
+    front = sorted((r["error"], r["ms"]) for r in cands if r["error"] > 0)
+    if error <= 0:
+        return None
+    for (e0, t0), (e1, t1) in zip(front, front[1:]):
+        if e0 <= error <= e1:
+            w = 0.0 if e1 == e0 else math.log(error / e0) / math.log(e1 / e0)
+            return math.exp(math.log(t0) + w * math.log(t1 / t0))
+    return None
+
+
 def matched(rows: list) -> list:
     """Per scene, paramlod variant and peer: the peer's resolution whose silhouette error is closest
-    to paramlod's, and the peer's time over paramlod's there (> 1: paramlod is faster)."""
+    to paramlod's, and the peer's time over paramlod's there (> 1: paramlod is faster); and the
+    peer's time interpolated at paramlod's very error (``peer_ms_at``; None outside its rows' range)
+    over paramlod's, which a closest resolution of half or twice the error does not give."""
     out = []
     ok = [r for r in rows if "ms" in r and "error" in r]
     for p in (r for r in ok if r["tool"] == "paramlod"):
@@ -544,6 +561,8 @@ def matched(rows: list) -> list:
             out.append({"scene": p["scene"], "paramlod": p["variant"], "paramlod_ms": p["ms"],
                         "paramlod_error": p["error"], "peer": tool, "resolution": best["resolution"],
                         "peer_ms": best["ms"], "peer_error": best["error"], "ratio": best["ms"] / p["ms"]})
+            at = peer_ms_at(cands, p["error"])
+            out[-1].update(peer_ms_at_error=at, ratio_at_error=None if at is None else at / p["ms"])
     return out
 
 
@@ -649,13 +668,18 @@ def format_peers_markdown(result: dict) -> str:
             lines.append(f"| {r['scene']} | {r['tool']} | {r.get('version', '')} | {r['variant']} | {r['ms']:.1f} "
                          f"| {r['error']:.3f} |")
     if result.get("matched"):
-        lines += ["", "At matched silhouette error (the peer's mesh resolution whose error is closest to paramlod's):", "",
-                  "| scene | paramlod | ms | error | peer | resolution | peer ms | peer error | peer ms / paramlod ms |",
-                  "|---|---|---:|---:|---|---:|---:|---:|---:|"]
+        lines += ["", "At matched silhouette error (the peer's mesh resolution whose error is closest to paramlod's; "
+                      "then the peer's time interpolated at paramlod's error between its two resolutions around it, "
+                      "log time against log error, - outside their range):", "",
+                  "| scene | paramlod | ms | error | peer | resolution | peer ms | peer error | peer ms / paramlod ms "
+                  "| peer ms at paramlod's error | ratio there |",
+                  "|---|---|---:|---:|---|---:|---:|---:|---:|---:|---:|"]
         for m in result["matched"]:
+            at = m.get("peer_ms_at_error")
+            there = "- | -" if at is None else f"{at:.1f} | {m['ratio_at_error']:.2f}"
             lines.append(f"| {m['scene']} | {m['paramlod']} | {m['paramlod_ms']:.1f} | {m['paramlod_error']:.3f} | "
                          f"{m['peer']} | {m['resolution']} | {m['peer_ms']:.1f} | {m['peer_error']:.3f} | "
-                         f"{m['ratio']:.2f} |")
+                         f"{m['ratio']:.2f} | {there} |")
     if result["sampling"]:
         lines += ["", f"Sampling the bunny; evenness: nearest-neighbour distance over the hexagonal spacing "
                       f"(min, CV), of all points and of the first {PREFIX:,}:", "",

@@ -63,7 +63,7 @@ from paramlod.surfels.render import FixedCount, default_camera, render_surfels
 VARIANTS = {"points": ("points", None), "points-4xSS": ("points", "4xSS"), "points-ssaa": ("points-ssaa", None),
             "tess": ("tess", "noAA"), "tess-4xSS+8xMS": ("tess", "4xSS+8xMS"),
             "points-hybrid": ("points", "hybrid"), "tess-hybrid": ("tess", "hybrid"), "points-centre": ("points", None),
-            "points-quad": ("points", None),
+            "points-quad": ("points", None), "points-quad-fine": ("points", None),
             "tess-grid": ("tess", "noAA"), "tess-chord": ("tess", "noAA"),
             "tess-segment": ("tess", "noAA")}   # their own settings: scenes.VARIANT_SETTINGS
 DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8xMS"]

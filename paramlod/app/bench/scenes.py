@@ -17,6 +17,10 @@ VARIANT_SETTINGS = {
     "points-centre": {("points", "coverage"): "centre"},                   # docs/points.md, "Pixel-centre coverage"
     # docs/points.md, "Quad coverage": quads are exact however far apart their corners, so half the density
     "points-quad": {("points", "coverage"): "quad", ("points", "density"): 0.75},
+    # the same with the LOD stage splitting lines that turn by more than 90 degrees (LodSettings.detail_angle,
+    # docs/lod.md): smaller patches where glyph lobes bend, so the grids sized from their longest segment
+    # shrink too; on the peers bench's glyph fields the most exact quads for their time (docs/peers.md)
+    "points-quad-fine": {("points", "coverage"): "quad", ("points", "density"): 0.75, ("lod", "detail_angle"): 90.0},
     "tess-grid": {("tess", "tessellator"): "grid"},                         # docs/tessellation.md, "The grid tessellator"
     "tess-chord": {("tess", "mode"): "chord", ("tess", "l_min"): 1.0},      # docs/tessellation.md, "Tessellation levels"
     "tess-segment": {("tess", "inner_measure"): "segment"},                 # docs/tessellation.md, "Tessellation levels"
