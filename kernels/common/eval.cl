@@ -82,7 +82,7 @@ __kernel void eval_split_throughput(uint func, float a0, float da, float b0, flo
 #ifdef PL_VECTOR
 // The vector code (pl_vsurface_rest, paramlod.function.codegen_vector) on PL_VW samples a
 // work-item: uv holds 2 PL_VW floats a group (u then v per lane), whose lanes share the split's
-// axis coordinate (the carried values are lane 0's, as points.cl's quad runs share a grid line).
+// axis coordinate (the carried values are lane 0's, as points.cl's runs share a grid line).
 // out: 9 floats a sample, position and partials. Twin: pl_surface (eval_samples above).
 __kernel void eval_vector(uint func, __global const float* uv, uint n_groups,
                           __global const float* params, __global float* out)

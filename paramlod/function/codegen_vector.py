@@ -1,10 +1,11 @@
 """Code generation for CPU lanes: each function's surface code (position and partials) on
-``PL_VW`` samples at once, in OpenCL vector types, for the quad sampler on CPU devices
-(kernels/points/points.cl, ``PL_VECTOR``).
+``PL_VW`` samples at once, in OpenCL vector types, for the direct point sampler's runs on CPU
+devices (kernels/points/points.cl ``surface_lanes``, compiled with ``PL_VECTOR``).
 
 Why: PoCL compiles a work-item's scalar code as it stands; the long chains of an SH glyph or a
 fibre evaluate at one sample per instruction. The same steps on ``float8`` fill the CPU's vector
-registers (2-core AMD EPYC, PoCL 3, order-8 glyph: docs/points.md "Vector evaluation").
+registers (2-core AMD EPYC, PoCL 3: the order-8 glyph field's points frame 1.9x faster,
+docs/points.md "Vector lanes").
 
 For each function index i the source defines, from the same lowered steps as the scalar code
 (``paramlod.function.codegen_cl.lowered`` and its surface split):
