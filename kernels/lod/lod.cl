@@ -440,10 +440,11 @@ inline float box_float(int k) {
 // slots whose view sees the patch, and adds it to the measures over the views (atomic max). Once
 // every chunk is done, w_u, w_v of each view that sees the patch go in, and work-item 0 decides.
 // The host picks LOD_GROUP and LOD_SLOTS for the number of views (paramlod/lod/stage.py: more
-// views, more work-items, 32 a slot, up to (256, 8): a step's few patches make its time one
-// patch's, so the work-items a view has stay those one view has); with one view, (32, 1), this is
+// views, more work-items, 32 a slot on GPUs, up to (256, 8): a step's few patches make its time
+// one patch's, so the work-items a view has stay those one view has; one a slot on CPU devices,
+// where PoCL runs each barrier as a loop over the work-items); with one view, (32, 1), this is
 // the single-view step bit for bit (the same operations in the same order, a maximum over one
-// view). Local memory: 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views; on GPUs 68
+// view), and so is (1, 1): every loop over the work-items strides by LOD_GROUP. Local memory: 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views; on GPUs 68
 // bytes more for each float the split carries (axis_c: 2.2 KB for the glyphs' 32).
 // Compiled per kind of stage (paramlod/lod/stage.py LodStage._kernels): LOD_BACK_TEST 0 leaves the
 // back-face test out (no instance is one-sided, or culling is off), LOD_TIER_CHECKS 0 the hybrid
@@ -561,8 +562,8 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                 cnode[2 * CONE_NODES + k] = (float4)(xform_dir(I + INST_MODEL, fv), 0.0f);
             }
         }
-        if (l < COMB) comb[l] = l == 13u || l == 14u ? (uint)box_key(INFINITY)
-                              : l == 15u || l == 16u ? (uint)box_key(-INFINITY) : 0u;
+        for (uint k = l; k < COMB; k += LOD_GROUP)
+            comb[k] = k == 13u || k == 14u ? (uint)box_key(INFINITY) : k == 15u || k == 16u ? (uint)box_key(-INFINITY) : 0u;
         for (uint v = l; v < n_views; v += LOD_GROUP) vseg[2u * v] = vseg[2u * v + 1u] = vneed[2u * v] = vneed[2u * v + 1u] = 0u;
         barrier(CLK_LOCAL_MEM_FENCE);
         if (one_sided && l == 0u) {   // read after the chunks' barriers

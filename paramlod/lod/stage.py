@@ -122,18 +122,24 @@ LOD_LOCAL = constant("LOD_LOCAL")   # work-items measuring one patch together (k
 LOD_MAX_SLOTS = 8
 SAMPLE_RUNS_CPU = True   # kernels/lod/lod.cl LOD_RUN on CPU devices (GPUs: lod_axis, the split shared in local memory)
 LOD_MAX_GROUP = 256   # work-items a patch at most (every OpenCL GPU takes 256)
+# work-items a view slot on CPU devices: one a patch. PoCL runs a work-group's barriers as loops over
+# its work-items; with 32 a patch, as GPUs take, the 2-core AMD EPYC's LOD stage took 1.4-1.6x as long
+# (640 x 360, framing distance: fibre curtain 1,542 -> 953 ms, yarn curtain 179 -> 125, hardi12
+# 132-141 -> 82-99; 2 and 4 a patch measured as 1; docs/lod.md)
+LOD_LOCAL_CPU = 1
 
 
-def lod_layout(n_views: int, max_group: int = LOD_MAX_GROUP) -> tuple[int, int]:
+def lod_layout(n_views: int, max_group: int = LOD_MAX_GROUP, per_slot: int = LOD_LOCAL) -> tuple[int, int]:
     """(work-items per patch, view slots per chunk) of the LOD kernel for ``n_views`` views:
-    LOD_LOCAL work-items a slot, as one view has, up to LOD_MAX_SLOTS slots and LOD_MAX_GROUP
-    work-items; more views take chunks of slots in turn. A step's patches are mostly fewer than
+    ``per_slot`` work-items a slot (LOD_LOCAL on GPUs, LOD_LOCAL_CPU on CPU devices), as one view
+    has, up to LOD_MAX_SLOTS slots and LOD_MAX_GROUP work-items; more views take chunks of slots in
+    turn. A step's patches are mostly fewer than
     the device's work-groups, so a step lasts about as long as one patch takes, and more views
     need more work-items per patch to take no longer (H200, 48 views: the LOD stage 1.4-2.1x one
     view's time, 3.2-3.9x with 32 work-items). ``max_group``: the most the device takes, a power
     of two."""
     slots = min(1 << (int(n_views) - 1).bit_length(), LOD_MAX_SLOTS)
-    return min(LOD_LOCAL * slots, max_group, LOD_MAX_GROUP), slots
+    return min(per_slot * slots, max_group, LOD_MAX_GROUP), slots
 
 
 class LodStage:
@@ -147,6 +153,7 @@ class LodStage:
         dev = cl_device()
         # the largest power of two of work-items per group the device takes
         self._max_group = 1 << (min(dev.device.max_work_group_size, LOD_MAX_GROUP).bit_length() - 1)
+        self._per_slot = LOD_LOCAL if dev.is_gpu else LOD_LOCAL_CPU
         # per kernel layout (lod_layout): one kernel object per step with its arguments bound once
         # (they change only when a buffer grows or the scene, camera buffer, views or threshold
         # change): a frame only enqueues. The program of single-view frames of two-sided materials
@@ -271,7 +278,7 @@ class LodStage:
     def _kernels(self, n_views: int, backface: bool, tiers: bool):
         """(layout, the step kernels) for ``n_views`` views, with the back-face test and the hybrid
         tiers' checks or without them, built on first use."""
-        layout = lod_layout(n_views, self._max_group)
+        layout = lod_layout(n_views, self._max_group, self._per_slot)
         key = (layout, backface, tiers)
         if key not in self._step_kernels:
             group, slots = layout

@@ -61,11 +61,12 @@ def ring(u, v):
 
 
 def test_runs_of_split_samples_give_the_same_render_list(monkeypatch):
-    # CPU devices: a work-item evaluates a run of samples, the steps of the position split's
-    # parameter once for those sharing it (kernels/lod/lod.cl lod_order); GPUs (SAMPLE_RUNS_CPU
-    # False here): one sample a work-item, the split's 17 values of its parameter evaluated once
-    # each and shared in local memory (lod_axis). Fibre and glyph split along u, the ring along v,
-    # the sphere not at all; the render lists are the same, bit for bit
+    # CPU devices: one work-item a patch (LOD_LOCAL_CPU) evaluates its samples in a run, the steps
+    # of the position split's parameter once for those sharing it (kernels/lod/lod.cl lod_order);
+    # GPUs (SAMPLE_RUNS_CPU False and LOD_LOCAL work-items a patch here): one sample a work-item,
+    # the split's 17 values of its parameter evaluated once each and shared in local memory
+    # (lod_axis); and runs of 3 in the GPUs' work-groups. Fibre and glyph split along u, the ring
+    # along v, the sphere not at all; the render lists are the same, bit for bit
     scene = pl.Scene()
     scene.add("fiber", transform=pl.scale(0.2))
     scene.add("sh_glyph", transform=pl.translate(1.5, 0, 0) @ pl.scale(0.5))
@@ -75,13 +76,16 @@ def test_runs_of_split_samples_give_the_same_render_list(monkeypatch):
         [SPLIT_U, SPLIT_U, None, SPLIT_V]
     cam = pl.Camera.look_at((0.3, 0.8, 4.0), (0, 0, 0), size=(320, 240))
     lists = []
-    for runs in (False, True):
+    for runs, per_slot in ((False, stage_module.LOD_LOCAL), (True, stage_module.LOD_LOCAL_CPU),
+                           (True, stage_module.LOD_LOCAL)):
         monkeypatch.setattr(stage_module, "SAMPLE_RUNS_CPU", runs)
+        monkeypatch.setattr(stage_module, "LOD_LOCAL_CPU", per_slot)
         got, steps = cl_render_list(scene, cam, pl.LodSettings(threshold=(24.0, 24.0)))
         lists.append((got[sort_key(got)].view(np.uint8), steps))   # in one order (atomics append)
     assert len(lists[0][0]) > 100 * got.dtype.itemsize and len(lists[0][1]) >= 3
-    np.testing.assert_array_equal(lists[1][0], lists[0][0])
-    assert lists[1][1] == lists[0][1]
+    for other in lists[1:]:
+        np.testing.assert_array_equal(other[0], lists[0][0])
+        assert other[1] == lists[0][1]
 
 
 def test_stage_follows_the_view_from_far_to_near_and_back():

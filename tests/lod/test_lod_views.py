@@ -8,6 +8,7 @@ from hypothesis import given, settings, strategies as st
 import paramlod as pl
 from paramlod.core.layouts import camera_record
 from paramlod.core.views import Views, cube_faces, quilt, stereo
+from paramlod.lod import stage as stage_module
 from paramlod.lod.patches import EVAL_DTYPE, FLAG_FORCED, initial_patches, sort_key
 from paramlod.lod.reference import lod_step, run_lod, view_masks
 from helpers.stages import ParametricStage
@@ -70,8 +71,11 @@ def one_torus():
     return scene
 
 
+@pytest.mark.parametrize("per_slot", [stage_module.LOD_LOCAL_CPU, stage_module.LOD_LOCAL])
 @pytest.mark.parametrize("name", list(camera_sets()))
-def test_multi_view_kernel_matches_numpy_twin(name):
+def test_multi_view_kernel_matches_numpy_twin(name, per_slot, monkeypatch):
+    # work-items a view slot: the CPU devices' layout and the GPUs' (lod_layout), both run here
+    monkeypatch.setattr(stage_module, "LOD_LOCAL_CPU", per_slot)
     make, cams = camera_sets()[name]
     scene = make()
     lod = pl.LodSettings(threshold=(24.0, 24.0))
