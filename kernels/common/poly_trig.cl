@@ -17,15 +17,20 @@
 
 #define PL_OVERLOAD __attribute__((overloadable))
 
+// The reduction and the two polynomials, one text for a float and for PL_VW lanes (T, its int type
+// IT; `half`: 0.5 with x's sign): q the nearest integer to x 2/pi, s and k sin r and cos r
+#define PL_SINCOS_CORE(T, IT, x, half) \
+    IT q = convert_##IT(x * 0.636619772367581343f + (half)); \
+    T j = convert_##T(q); \
+    T r = ((x - j * 1.5703125f) - j * 4.837512969970703125e-4f) - j * 7.54978995489188216e-8f; \
+    T z = r * r; \
+    T s = ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * r + r; \
+    T k = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) * z * z \
+          - 0.5f * z + 1.0f;
+
 inline float PL_OVERLOAD pl_poly_sincos(float x, float* c) {
     if (x > PL_TRIG_LIMIT || x < -PL_TRIG_LIMIT) return sincos(x, c);
-    int q = (int)(x * 0.636619772367581343f + (x < 0.0f ? -0.5f : 0.5f));
-    float j = (float)q;
-    float r = ((x - j * 1.5703125f) - j * 4.837512969970703125e-4f) - j * 7.54978995489188216e-8f;
-    float z = r * r;
-    float s = ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * r + r;
-    float k = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) * z * z
-              - 0.5f * z + 1.0f;
+    PL_SINCOS_CORE(float, int, x, x < 0.0f ? -0.5f : 0.5f)
     int quadrant = q & 3;
     *c = quadrant == 0 ? k : quadrant == 1 ? -s : quadrant == 2 ? -k : s;
     return quadrant == 0 ? s : quadrant == 1 ? k : quadrant == 2 ? -s : -k;
@@ -39,13 +44,7 @@ inline float PL_OVERLOAD pl_poly_cos(float x) { float c; pl_poly_sincos(x, &c); 
 // chosen by select; a vector with a lane beyond the limit takes the builtin in every lane
 inline float8 PL_OVERLOAD pl_poly_sincos(float8 x, float8* c) {
     if (any(x > PL_TRIG_LIMIT || x < -PL_TRIG_LIMIT)) return sincos(x, c);
-    int8 q = convert_int8(x * 0.636619772367581343f + select((float8)0.5f, (float8)-0.5f, x < 0.0f));
-    float8 j = convert_float8(q);
-    float8 r = ((x - j * 1.5703125f) - j * 4.837512969970703125e-4f) - j * 7.54978995489188216e-8f;
-    float8 z = r * r;
-    float8 s = ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * r + r;
-    float8 k = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) * z * z
-               - 0.5f * z + 1.0f;
+    PL_SINCOS_CORE(float8, int8, x, select((float8)0.5f, (float8)-0.5f, x < 0.0f))
     int8 quadrant = q & 3;
     *c = select(select(select(s, -k, quadrant == 2), -s, quadrant == 1), k, quadrant == 0);
     return select(select(select(-k, -s, quadrant == 2), k, quadrant == 1), s, quadrant == 0);
