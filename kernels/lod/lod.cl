@@ -562,8 +562,13 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                 cnode[2 * CONE_NODES + k] = (float4)(xform_dir(I + INST_MODEL, fv), 0.0f);
             }
         }
+#if LOD_GROUP >= COMB   // GPUs: a work-item each
+        if (l < COMB) comb[l] = l == 13u || l == 14u ? (uint)box_key(INFINITY)
+                              : l == 15u || l == 16u ? (uint)box_key(-INFINITY) : 0u;
+#else   // CPU devices' smaller groups
         for (uint k = l; k < COMB; k += LOD_GROUP)
             comb[k] = k == 13u || k == 14u ? (uint)box_key(INFINITY) : k == 15u || k == 16u ? (uint)box_key(-INFINITY) : 0u;
+#endif
         for (uint v = l; v < n_views; v += LOD_GROUP) vseg[2u * v] = vseg[2u * v + 1u] = vneed[2u * v] = vneed[2u * v + 1u] = 0u;
         barrier(CLK_LOCAL_MEM_FENCE);
         if (one_sided && l == 0u) {   // read after the chunks' barriers
