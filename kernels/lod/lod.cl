@@ -444,8 +444,9 @@ inline float box_float(int k) {
 // one patch's, so the work-items a view has stay those one view has; one a slot on CPU devices,
 // where PoCL runs each barrier as a loop over the work-items); with one view, (32, 1), this is
 // the single-view step bit for bit (the same operations in the same order, a maximum over one
-// view), and so is (1, 1): every loop over the work-items strides by LOD_GROUP. Local memory: 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views; on GPUs 68
-// bytes more for each float the split carries (axis_c: 2.2 KB for the glyphs' 32).
+// view), and so is (1, 1): every loop over the work-items strides by LOD_GROUP. Local memory:
+// 4.3 KB at (32, 1), 14.4 KB at (256, 8) for up to 64 views; on GPUs 68 bytes more for each float
+// the split carries (axis_c: 2.2 KB for the glyphs' 32).
 // Compiled per kind of stage (paramlod/lod/stage.py LodStage._kernels): LOD_BACK_TEST 0 leaves the
 // back-face test out (no instance is one-sided, or culling is off), LOD_TIER_CHECKS 0 the hybrid
 // tiers' checks (no hybrid frame). Code a stage never runs still costs the GPU: with both in, the
