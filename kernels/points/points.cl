@@ -138,6 +138,12 @@ inline float grid_at(float x0, float x1, uint n, uint na, float a, float m, uint
     return (x0 + a * (float)na) + m * (float)(i - na);             // middle
 }
 
+// Grid line i of g across a run (patch_runs, quad_runs): its u, or its v for a split along v, in a
+// grid of nu x nv samples.
+inline float line_at(PointGrid g, uint split, uint nu, uint nv, uint i) {
+    return split == PL_SPLIT_V ? grid_at(g.v0, g.v1, nv, g.nav, g.av, g.sv, i) : grid_at(g.u0, g.u1, nu, g.nau, g.au, g.su, i);
+}
+
 #define SAMPLE_DRAWN 0
 #define SAMPLE_NAN 1
 #define SAMPLE_CLIPPED 2
@@ -569,6 +575,16 @@ inline bool quad_may_cover(QuadVertex a, QuadVertex b, QuadVertex c, QuadVertex 
     return ceil(x0 - 0.5f) <= floor(x1 - 0.5f) && ceil(y0 - 0.5f) <= floor(y1 - 0.5f);
 }
 
+// quad_may_cover, then the quad's two triangles (q00, q10, q11) and (q00, q11, q01), one after the
+// other; the colour atomics issued.
+inline uint cover_quad(QuadVertex q00, QuadVertex q10, QuadVertex q01, QuadVertex q11, __global const float* cam,
+                       float4 mat, __global const float* light, uint object_id, __global ulong* color_buf,
+                       __global ulong* aux_buf) {
+    if (!quad_may_cover(q00, q10, q01, q11)) return 0u;
+    uint issued = cover_triangle(q00, q10, q11, cam, mat, light, object_id, color_buf, aux_buf);
+    return issued + cover_triangle(q00, q11, q01, cam, mat, light, object_id, color_buf, aux_buf);
+}
+
 inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
                          uint measure, uint max_side) {
     GridAxis gu, gv;
@@ -673,34 +689,28 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                 uint a0 = unit % qr.blocks * PL_QUAD_LINES, lines = min(PL_QUAD_LINES, qr.na - 1u - a0) + 1u;
                 uint b0 = unit / qr.blocks * qr.len, b1 = min(b0 + qr.len, qr.nb - 1u);
 #if PL_RUN > 1
-                float C[PL_QUAD_LINES + 1u][PL_SPLIT_FLOATS];
+                float a_line[PL_QUAD_LINES + 1u], C[PL_QUAD_LINES + 1u][PL_SPLIT_FLOATS];
                 for (uint k = 0u; k < lines; ++k) {
-                    if (qr.split == PL_SPLIT_U) pl_surface_axis(func, grid_at(g.u0, g.u1, g.nu_grid, g.nau, g.au, g.su, a0 + k), P, C[k]);
-                    if (qr.split == PL_SPLIT_V) pl_surface_axis(func, grid_at(g.v0, g.v1, g.nv_grid, g.nav, g.av, g.sv, a0 + k), P, C[k]);
+                    a_line[k] = line_at(g, qr.split, g.nu_grid, g.nv_grid, a0 + k);
+                    if (qr.split) pl_surface_axis(func, a_line[k], P, C[k]);
                 }
 #endif
 #ifdef PL_VECTOR   // CPUs: each line's corners evaluated PL_VW at a time, then the quads drawn
                 QuadVertex qv[PL_QUAD_LINES + 1u][PL_QUAD_STEPS + 1u];
                 uint nb = b1 - b0 + 1u;   // corners down each line
                 for (uint k = 0u; k < lines; ++k) {
-                    float a = qr.split == PL_SPLIT_V ? grid_at(g.v0, g.v1, g.nv_grid, g.nav, g.av, g.sv, a0 + k)
-                                                     : grid_at(g.u0, g.u1, g.nu_grid, g.nau, g.au, g.su, a0 + k);
                     for (uint j0 = 0u; j0 < nb; j0 += PL_VW) {
                         plv u, v;
-                        line_lanes(g, qr.split, g.nu_grid, g.nv_grid, a, b0 + j0, b1, &u, &v);
+                        line_lanes(g, qr.split, g.nu_grid, g.nv_grid, a_line[k], b0 + j0, b1, &u, &v);
                         quad_vertices(func, P, I, C[k], u, v, cv, min((uint)PL_VW, nb - j0), &qv[k][j0]);
                     }
                     for (uint j = 0u; j < nb; ++j) n_nan += qv[k][j].state == SAMPLE_NAN;
                 }
                 n_samples += lines * nb;
-                for (uint j = 1u; j < nb; ++j) {
-                    for (uint k = 0u; k + 1u < lines; ++k) {
-                        QuadVertex q00 = qv[k][j - 1u], q10 = qv[k + 1u][j - 1u], q01 = qv[k][j], q11 = qv[k + 1u][j];
-                        if (!quad_may_cover(q00, q10, q01, q11)) continue;
-                        n_atomics += cover_triangle(q00, q10, q11, cv, mat, light, object_id, color_buf, aux_buf);
-                        n_atomics += cover_triangle(q00, q11, q01, cv, mat, light, object_id, color_buf, aux_buf);
-                    }
-                }
+                for (uint j = 1u; j < nb; ++j)
+                    for (uint k = 0u; k + 1u < lines; ++k)
+                        n_atomics += cover_quad(qv[k][j - 1u], qv[k + 1u][j - 1u], qv[k][j], qv[k + 1u][j], cv, mat, light,
+                                                object_id, color_buf, aux_buf);
 #else
                 QuadVertex prev[PL_QUAD_LINES + 1u], cur[PL_QUAD_LINES + 1u];
                 for (uint ib = b0; ib <= b1; ++ib) {
@@ -716,12 +726,9 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                         n_samples++;
                         if (cur[k].state == SAMPLE_NAN) n_nan++;
                     }
-                    for (uint k = 0u; ib > b0 && k + 1u < lines; ++k) {
-                        QuadVertex q00 = prev[k], q10 = prev[k + 1u], q01 = cur[k], q11 = cur[k + 1u];
-                        if (!quad_may_cover(q00, q10, q01, q11)) continue;
-                        n_atomics += cover_triangle(q00, q10, q11, cv, mat, light, object_id, color_buf, aux_buf);
-                        n_atomics += cover_triangle(q00, q11, q01, cv, mat, light, object_id, color_buf, aux_buf);
-                    }
+                    for (uint k = 0u; ib > b0 && k + 1u < lines; ++k)
+                        n_atomics += cover_quad(prev[k], prev[k + 1u], cur[k], cur[k + 1u], cv, mat, light, object_id,
+                                                color_buf, aux_buf);
                     for (uint k = 0u; k < lines; ++k) prev[k] = cur[k];
                 }
 #endif
@@ -734,12 +741,9 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                 uint ia = unit % runs.na, ib0 = unit / runs.na * runs.len;
 #if PL_RUN > 1
                 uint ib1 = min(ib0 + runs.len, runs.nb);
-                float C[PL_SPLIT_FLOATS];
-                if (runs.split == PL_SPLIT_U) pl_surface_axis(func, grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, ia), P, C);
-                if (runs.split == PL_SPLIT_V) pl_surface_axis(func, grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, ia), P, C);
+                float a_line = line_at(g, runs.split, g.nu, g.nv, ia), C[PL_SPLIT_FLOATS];
+                if (runs.split) pl_surface_axis(func, a_line, P, C);
 #ifdef PL_VECTOR   // CPUs: the run's samples evaluated PL_VW at a time (surface_lanes)
-                float a_line = runs.split == PL_SPLIT_V ? grid_at(g.v0, g.v1, g.nv, g.nav, g.av, g.sv, ia)
-                                                        : grid_at(g.u0, g.u1, g.nu, g.nau, g.au, g.su, ia);
                 SurfaceLanes lanes;
 #endif
                 for (uint ib = ib0; ib < ib1; ++ib) {

@@ -460,12 +460,6 @@ def cl_function_source(fn: ParametricFunction, index: int, optimize: bool = True
     return per_fn[key]
 
 
-def lowered(fn: ParametricFunction, which: str, optimize: bool = True) -> Lowered:
-    """The steps of ``pl_pos_i`` (``which="position"``) or ``pl_surf_i`` ("surface") as generated."""
-    bindings, outputs = fn.device_program(which) if optimize else fn.program(which)
-    return lower(outputs, bindings, optimize=optimize, sincos=optimize)
-
-
 def _cl_function_source(fn: ParametricFunction, index: int, optimize: bool = True) -> str:
     head = f"// {fn.name} (from {fn.source})\n"
     if fn.is_snippet:
@@ -482,15 +476,25 @@ def _cl_function_source(fn: ParametricFunction, index: int, optimize: bool = Tru
                            loads + step_lines(fn, low.steps), low.outputs)
     if not optimize:
         return head + pos + surf
+    _surface_lows[fn] = low
     split = _splits[fn] = split_surface(fn, low)
     split_pos = _position_splits[fn] = split_surface(fn, low_pos)
     return (head + pos + surf + (_split_source(fn, index, loads, split) if split else "")
             + (_split_source(fn, index, loads, split_pos, position=True) if split_pos else ""))
 
 
-# the split of each function's generated surface and position code (None: none), filled with its source
+# the lowered surface code of each function and its splits (None: none), filled with its source
+_surface_lows: "weakref.WeakKeyDictionary[ParametricFunction, Lowered]" = weakref.WeakKeyDictionary()
 _splits: "weakref.WeakKeyDictionary[ParametricFunction, SplitSurface | None]" = weakref.WeakKeyDictionary()
 _position_splits: "weakref.WeakKeyDictionary[ParametricFunction, SplitSurface | None]" = weakref.WeakKeyDictionary()
+
+
+def surface_lowered(fn: ParametricFunction) -> Lowered:
+    """The steps of ``pl_surf_i`` (``lower``'s result) as its generated source has them: lowered
+    once per function, with its source."""
+    if fn not in _surface_lows:
+        cl_function_source(fn, 0)
+    return _surface_lows[fn]
 
 
 def surface_split(fn: ParametricFunction) -> SplitSurface | None:

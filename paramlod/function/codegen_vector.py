@@ -8,7 +8,7 @@ registers (2-core AMD EPYC, PoCL 3: the order-8 glyph field's points frame 1.9x 
 docs/points.md "Vector lanes").
 
 For each function index i the source defines, from the same lowered steps as the scalar code
-(``paramlod.function.codegen_cl.lowered`` and its surface split):
+(``paramlod.function.codegen_cl.surface_lowered`` and its surface split):
 
     void pl_vsurf_i(plv u, plv v, __global const float* P, plv* o)                     (no split)
     void pl_vrest_i(plv u, plv v, __global const float* P, const float* C, plv* o)     (split)
@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import sympy as sp
 
-from paramlod.function.codegen_cl import (CLPrinter, SinCos, _print_checked, _Rsqrt, _Sqrt, lowered, param_lines,
-                                          step_lines, surface_split)
+from paramlod.function.codegen_cl import (CLPrinter, SinCos, _print_checked, _Rsqrt, _Sqrt, param_lines, step_lines,
+                                          surface_lowered, surface_split)
 from paramlod.function.define import ParametricFunction
 
 VECTOR_WIDTH = 8
@@ -75,7 +75,7 @@ def _vector_function(fn: ParametricFunction, index: int) -> tuple[str, bool] | N
     loads = param_lines(fn, _vprinter)
     split = surface_split(fn)
     if split is None:
-        low = lowered(fn, "surface")
+        low = surface_lowered(fn)
         if not _vector_ready(fn, low.steps, low.outputs):
             return None
         return (f"inline void pl_vsurf_{index}(plv u, plv v, __global const float* P, plv* o) {{\n"
