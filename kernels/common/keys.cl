@@ -10,13 +10,14 @@
 #include "common/shading.cl"
 #include "common/hash.cl"
 
-// Linear [0, 1] to the sRGB 8-bit code that rounding the exact sRGB curve would give: a binary
-// search of the prelude's SRGB8_THRESHOLDS (paramlod.core.color.srgb8_thresholds).
+// Linear [0, 1] to the sRGB 8-bit code that rounding the exact sRGB curve would give: the count
+// of the prelude's SRGB8_THRESHOLDS[1..255] at or below x (paramlod.core.color.srgb8_thresholds).
+// x's bucket of [0, 1] (x * SRGB8_BUCKETS is exact) holds at most one threshold, so the code is
+// the bucket's first code or one more (srgb8_bucket_codes). Below 0 and NaN give 0, above 1 255.
 inline uint srgb8(float x) {
-    uint k = 0;
-    for (uint step = 128; step > 0; step >>= 1)
-        if (SRGB8_THRESHOLDS[k + step] <= x) k += step;
-    return k;
+    uint bucket = x > 0.0f ? (uint)fmin(x * (float)SRGB8_BUCKETS, (float)(SRGB8_BUCKETS - 1)) : 0u;
+    uint k = SRGB8_BUCKET_CODES[bucket];
+    return k + (uint)(k < 255u && SRGB8_THRESHOLDS[min(k + 1u, 255u)] <= x);
 }
 
 inline uint oct10(float3 n) {

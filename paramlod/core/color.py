@@ -3,7 +3,8 @@
 The device reads everything of sRGB from here: ``cl_tables()`` (part of the OpenCL prelude,
 ``paramlod.core.layouts.cl_prelude``) emits ``srgb8_decoded()`` as the ``SRGB8_DECODED`` table that
 the resolve in kernels/points/resolve.cl looks codes up in, and ``srgb8_thresholds()`` as the
-``SRGB8_THRESHOLDS`` table that ``srgb8()`` in kernels/common/keys.cl searches; ``srgb_tables()``
+``SRGB8_THRESHOLDS`` table and ``srgb8_bucket_codes()`` as the ``SRGB8_BUCKET_CODES`` table that
+``srgb8()`` in kernels/common/keys.cl encodes with; ``srgb_tables()``
 are uploaded for the integer encoder ``encode_srgb8`` in kernels/points/subsamples.cl
 (paramlod.renderers.targets). The tessellation shaders write linear colour; the GL resolve encodes
 the image with ``linear_to_srgb8_buckets()``, the host's ``linear_to_srgb8`` bit for bit. The
@@ -123,6 +124,21 @@ def srgb8_thresholds() -> np.ndarray:
     return t
 
 
+@functools.lru_cache(maxsize=None)
+def srgb8_bucket_codes() -> np.ndarray:
+    """uint8 [SRGB8_BUCKETS]: the code ``srgb8()`` gives at the start of each bucket of [0, 1]
+    (value i / SRGB8_BUCKETS, the count of ``srgb8_thresholds()[1:]`` at or below it). Each
+    bucket's inside holds at most one threshold, so for x in bucket i the code is this one, plus 1
+    where x reaches the next threshold: one table read and one comparison (keys.cl ``srgb8``)
+    where the search of the thresholds took eight."""
+    thr = srgb8_thresholds()[1:].astype(np.float64)
+    starts = np.arange(SRGB8_BUCKETS, dtype=np.float64) / SRGB8_BUCKETS
+    codes = np.searchsorted(thr, starts, side="right")
+    if np.any(np.searchsorted(thr, starts + 1.0 / SRGB8_BUCKETS, side="left") - codes > 1):
+        raise AssertionError("two sRGB thresholds share a bucket: make SRGB8_BUCKETS larger")
+    return codes.astype(np.uint8)
+
+
 def srgb8_decoded() -> np.ndarray:
     """float32 [256]: the linear value of each sRGB 8-bit code (decoded in float64, rounded once).
     The resolve looks codes up here instead of calling pow(x, 2.4) per channel: pow was a third of
@@ -137,10 +153,16 @@ def _cl_float(x) -> str:
 
 def cl_tables() -> str:
     """The sRGB part of the OpenCL prelude: SRGB8_DECODED and SRGB8_THRESHOLDS."""
-    lines = ["// sRGB (paramlod/core/color.py): each 8-bit code's linear value and the encoder's thresholds"]
+    lines = ["// sRGB (paramlod/core/color.py): each 8-bit code's linear value, the encoder's thresholds",
+             "// and its code at the start of each of SRGB8_BUCKETS buckets of [0, 1]",
+             f"#define SRGB8_BUCKETS {SRGB8_BUCKETS}"]
     for name, table in (("SRGB8_DECODED", srgb8_decoded()), ("SRGB8_THRESHOLDS", srgb8_thresholds())):
         t = [_cl_float(x) for x in table]
         lines.append(f"__constant float {name}[256] = {{")
         lines += ["    " + ", ".join(t[i:i + 8]) + "," for i in range(0, 256, 8)]
         lines.append("};")
+    codes = [str(c) for c in srgb8_bucket_codes()]
+    lines.append("__constant uchar SRGB8_BUCKET_CODES[SRGB8_BUCKETS] = {")
+    lines += ["    " + ",".join(codes[i:i + 32]) + "," for i in range(0, len(codes), 32)]
+    lines.append("};")
     return "\n".join(lines)

@@ -97,7 +97,8 @@ def _clip(es, ns, k, P, near, gx, gy):
 
 
 def _srgb8(x):
-    """keys.cl srgb8(): the binary search of SRGB8_THRESHOLDS."""
+    """keys.cl srgb8(): the count of SRGB8_THRESHOLDS[1:] at or below x (0 for NaN), here by a
+    binary search; the kernel reads it from its bucket table (tests/renderers/test_points.py)."""
     k = np.zeros(x.shape, np.int64)
     step = 128
     while step:

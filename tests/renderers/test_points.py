@@ -2,13 +2,16 @@
 import re
 
 import numpy as np
+import pyopencl as cl
 import pyopencl.array as cla
 import pytest
 import sympy as sp
 
 import paramlod as pl
+from paramlod import kernels
 from paramlod.app.bench import peers
 from paramlod.app.bench.scenes import apply_variant_settings
+from paramlod.core.color import SRGB8_BUCKETS, srgb8_thresholds
 from paramlod.core.layouts import cl_prelude
 from paramlod.device.context import cl_device
 from paramlod.function import programs as function_programs
@@ -194,6 +197,28 @@ def test_srgb_encoding_table_rounds_the_srgb_curve():
     code = np.searchsorted(t, x, side="right") - 1
     away = np.min(np.abs(x[:, None] - t[None, 1:]), axis=1) > 1e-6
     np.testing.assert_array_equal(code[away], exact[away])
+
+
+def test_srgb8_encodes_as_the_threshold_search():
+    """keys.cl's srgb8 (one bucket of SRGB8_BUCKET_CODES, one comparison) gives the count of
+    SRGB8_THRESHOLDS[1:] at or below x, the search it replaced (raster_reference's twin), on every
+    float32 within 3 ulps of each threshold and of each bucket's start, random values, and below 0,
+    above 1, infinities and NaN (0)."""
+    t = srgb8_thresholds()
+    near = np.concatenate([t[1:], (np.arange(SRGB8_BUCKETS + 1) / SRGB8_BUCKETS).astype(np.float32)])
+    ulps = np.arange(-3, 4, dtype=np.int32)
+    x = np.concatenate([(near.view(np.int32)[:, None] + ulps[None, :]).ravel().view(np.float32),
+                        np.random.default_rng(1).random(50_000, np.float32),
+                        np.float32([-1.0, -0.0, 0.0, 1.0, 1.5, 1e30, np.inf, -np.inf, np.nan])])
+    dev = cl_device()
+    src = (cl_prelude() + "\n" + kernels.source("common/keys.cl") +
+           "\n__kernel void probe(__global const float* x, __global uint* o) {\n"
+           "    o[get_global_id(0)] = srgb8(x[get_global_id(0)]);\n}\n")
+    prog = cl.Program(dev.context, src).build()
+    xd, out = cla.to_device(dev.queue, x), cla.empty(dev.queue, len(x), np.uint32)
+    prog.probe(dev.queue, (len(x),), None, xd.data, out.data)
+    want = np.where(np.isnan(x), 0, np.searchsorted(t[1:], x, side="right"))
+    np.testing.assert_array_equal(out.get(), want)
 
 
 @pytest.mark.parametrize("scene_name", ["glyphs8", "torus"])
