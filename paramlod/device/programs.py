@@ -53,15 +53,18 @@ def build(files: list[str], defines: dict | None = None, options: tuple = (), ge
     """Compile the prelude (``paramlod.core.layouts.cl_prelude``: records, shading constants, sRGB
     table) + kernels/common/common.cl + ``generated`` + ``files`` (paths in kernels/);
     ``options`` are extra compiler options; ``describe`` names the generated code's sources in
-    the error a failed compile raises."""
+    the error a failed compile raises. Every program gets ``PL_GPU`` (1 on a GPU, else 0) for
+    code whose fastest form differs between the two (keys.cl's srgb8)."""
     prelude = cl_prelude()
     for name in defines or {}:   # a -D the prelude defines again would be silently overridden
-        if re.search(rf"^#define {name}\b", prelude, re.M):
-            raise ValueError(f"OpenCL define {name} is already a macro of the prelude (paramlod.core.layouts)")
+        if re.search(rf"^#define {name}\b", prelude, re.M) or name == "PL_GPU":
+            raise ValueError(f"OpenCL define {name} is already a macro of the prelude (paramlod.core.layouts) "
+                             "or of build()")
     src = "\n".join([prelude, kernels.source("common/common.cl"), generated,
                       *(kernels.source(f) for f in files)])
-    opts = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items())) + tuple(options)
     dev = cl_device()
+    defines = {**(defines or {}), "PL_GPU": int(dev.is_gpu)}
+    opts = tuple(f"-D{k}={v}" for k, v in sorted(defines.items())) + tuple(options)
     cache = dev.cache.setdefault("programs", {})
     key = (src, opts)
     prog = cache.get(key)

@@ -199,11 +199,12 @@ def test_srgb_encoding_table_rounds_the_srgb_curve():
     np.testing.assert_array_equal(code[away], exact[away])
 
 
-def test_srgb8_encodes_as_the_threshold_search():
-    """keys.cl's srgb8 (one bucket of SRGB8_BUCKET_CODES, one comparison) gives the count of
-    SRGB8_THRESHOLDS[1:] at or below x, the search it replaced (raster_reference's twin), on every
-    float32 within 3 ulps of each threshold and of each bucket's start, random values, and below 0,
-    above 1, infinities and NaN (0)."""
+@pytest.mark.parametrize("gpu_form", [0, 1])
+def test_srgb8_encodes_as_the_threshold_search(gpu_form):
+    """keys.cl's srgb8, both forms (CPUs: one bucket of SRGB8_BUCKET_CODES and one comparison;
+    GPUs, PL_GPU: a binary search), gives the count of SRGB8_THRESHOLDS[1:] at or below x
+    (raster_reference's twin), on every float32 within 3 ulps of each threshold and of each
+    bucket's start, random values, and below 0, above 1, infinities and NaN (0)."""
     t = srgb8_thresholds()
     near = np.concatenate([t[1:], (np.arange(SRGB8_BUCKETS + 1) / SRGB8_BUCKETS).astype(np.float32)])
     ulps = np.arange(-3, 4, dtype=np.int32)
@@ -214,7 +215,7 @@ def test_srgb8_encodes_as_the_threshold_search():
     src = (cl_prelude() + "\n" + kernels.source("common/keys.cl") +
            "\n__kernel void probe(__global const float* x, __global uint* o) {\n"
            "    o[get_global_id(0)] = srgb8(x[get_global_id(0)]);\n}\n")
-    prog = cl.Program(dev.context, src).build()
+    prog = cl.Program(dev.context, src).build(options=[f"-DPL_GPU={gpu_form}"])
     xd, out = cla.to_device(dev.queue, x), cla.empty(dev.queue, len(x), np.uint32)
     prog.probe(dev.queue, (len(x),), None, xd.data, out.data)
     want = np.where(np.isnan(x), 0, np.searchsorted(t[1:], x, side="right"))
