@@ -681,7 +681,6 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
 #endif
             if (c == first && get_local_id(0) == 0 && g.capped) n_capped++;
 #if PL_QUADS
-            __global const float* cv = cam;   // one view (DirectPointRenderer refuses quads with several)
             QuadRuns qr = quad_runs(pl_split(func), g.nu_grid, g.nv_grid);
             for (; c < min(next, c_end); ++c) {
                 uint unit = (c - first) * POINTS_LOCAL + get_local_id(0);   // the patch's block and run
@@ -695,43 +694,56 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     if (qr.split) pl_surface_axis(func, a_line[k], P, C[k]);
                 }
 #endif
+                // each view that sees the patch draws the block's quads into its layer; a corner is
+                // placed in one view, so the corners are evaluated again for every further view
+#if PL_VIEWS
+                for (ulong left = seen; left != 0ul; left &= left - 1ul) {
+                    uint view = 63u - (uint)clz(left & (~left + 1ul));   // the lowest view left
+#else
+                {
+                    uint view = 0u;
+#endif
+                    __global const float* cv = cam + view * CAM_FLOATS;
+                    __global ulong* color_view = color_buf + view * layer_pixels;
+                    __global ulong* aux_view = aux_buf + view * layer_pixels;
 #ifdef PL_VECTOR   // CPUs: each line's corners evaluated PL_VW at a time, then the quads drawn
-                QuadVertex qv[PL_QUAD_LINES + 1u][PL_QUAD_STEPS + 1u];
-                uint nb = b1 - b0 + 1u;   // corners down each line
-                for (uint k = 0u; k < lines; ++k) {
-                    for (uint j0 = 0u; j0 < nb; j0 += PL_VW) {
-                        plv u, v;
-                        line_lanes(g, qr.split, g.nu_grid, g.nv_grid, a_line[k], b0 + j0, b1, &u, &v);
-                        quad_vertices(func, P, I, C[k], u, v, cv, min((uint)PL_VW, nb - j0), &qv[k][j0]);
-                    }
-                    for (uint j = 0u; j < nb; ++j) n_nan += qv[k][j].state == SAMPLE_NAN;
-                }
-                n_samples += lines * nb;
-                for (uint j = 1u; j < nb; ++j)
-                    for (uint k = 0u; k + 1u < lines; ++k)
-                        n_atomics += cover_quad(qv[k][j - 1u], qv[k + 1u][j - 1u], qv[k][j], qv[k + 1u][j], cv, mat, light,
-                                                object_id, color_buf, aux_buf);
-#else
-                QuadVertex prev[PL_QUAD_LINES + 1u], cur[PL_QUAD_LINES + 1u];
-                for (uint ib = b0; ib <= b1; ++ib) {
+                    QuadVertex qv[PL_QUAD_LINES + 1u][PL_QUAD_STEPS + 1u];
+                    uint nb = b1 - b0 + 1u;   // corners down each line
                     for (uint k = 0u; k < lines; ++k) {
-                        uint iu = qr.split == PL_SPLIT_V ? ib : a0 + k, iv = qr.split == PL_SPLIT_V ? a0 + k : ib;
-                        float us = grid_at(g.u0, g.u1, g.nu_grid, g.nau, g.au, g.su, iu);
-                        float vs = grid_at(g.v0, g.v1, g.nv_grid, g.nav, g.av, g.sv, iv);
-#if PL_RUN > 1
-                        cur[k] = quad_vertex(func, P, I, qr.split, C[k], us, vs, cv);
-#else
-                        cur[k] = quad_vertex(func, P, I, 0u, 0, us, vs, cv);
-#endif
-                        n_samples++;
-                        if (cur[k].state == SAMPLE_NAN) n_nan++;
+                        for (uint j0 = 0u; j0 < nb; j0 += PL_VW) {
+                            plv u, v;
+                            line_lanes(g, qr.split, g.nu_grid, g.nv_grid, a_line[k], b0 + j0, b1, &u, &v);
+                            quad_vertices(func, P, I, C[k], u, v, cv, min((uint)PL_VW, nb - j0), &qv[k][j0]);
+                        }
+                        for (uint j = 0u; j < nb; ++j) n_nan += qv[k][j].state == SAMPLE_NAN;
                     }
-                    for (uint k = 0u; ib > b0 && k + 1u < lines; ++k)
-                        n_atomics += cover_quad(prev[k], prev[k + 1u], cur[k], cur[k + 1u], cv, mat, light, object_id,
-                                                color_buf, aux_buf);
-                    for (uint k = 0u; k < lines; ++k) prev[k] = cur[k];
-                }
+                    n_samples += lines * nb;
+                    for (uint j = 1u; j < nb; ++j)
+                        for (uint k = 0u; k + 1u < lines; ++k)
+                            n_atomics += cover_quad(qv[k][j - 1u], qv[k + 1u][j - 1u], qv[k][j], qv[k + 1u][j], cv, mat, light,
+                                                    object_id, color_view, aux_view);
+#else
+                    QuadVertex prev[PL_QUAD_LINES + 1u], cur[PL_QUAD_LINES + 1u];
+                    for (uint ib = b0; ib <= b1; ++ib) {
+                        for (uint k = 0u; k < lines; ++k) {
+                            uint iu = qr.split == PL_SPLIT_V ? ib : a0 + k, iv = qr.split == PL_SPLIT_V ? a0 + k : ib;
+                            float us = grid_at(g.u0, g.u1, g.nu_grid, g.nau, g.au, g.su, iu);
+                            float vs = grid_at(g.v0, g.v1, g.nv_grid, g.nav, g.av, g.sv, iv);
+#if PL_RUN > 1
+                            cur[k] = quad_vertex(func, P, I, qr.split, C[k], us, vs, cv);
+#else
+                            cur[k] = quad_vertex(func, P, I, 0u, 0, us, vs, cv);
 #endif
+                            n_samples++;
+                            if (cur[k].state == SAMPLE_NAN) n_nan++;
+                        }
+                        for (uint k = 0u; ib > b0 && k + 1u < lines; ++k)
+                            n_atomics += cover_quad(prev[k], prev[k + 1u], cur[k], cur[k + 1u], cv, mat, light, object_id,
+                                                    color_view, aux_view);
+                        for (uint k = 0u; k < lines; ++k) prev[k] = cur[k];
+                    }
+#endif
+                }   // the views
             }
 #else
             Runs runs = patch_runs(pl_split(func), g.nu, g.nv);

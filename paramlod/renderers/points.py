@@ -17,7 +17,6 @@ from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, patch_wraps, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
-from paramlod.errors import SceneError
 from paramlod.function.programs import POLY_TRIG, VECTOR, build, sample_run
 
 LOCAL_SIZE = 64
@@ -129,9 +128,6 @@ class DirectPointRenderer:
         for view v, as LodStage.render_views; needed with several views) and whose frustum holds
         it (``keys.layers`` must be ``n_views``)."""
         settings.validate()
-        if settings.coverage == "quad" and n_views > 1:
-            raise SceneError(f"points coverage \"quad\" draws frames of one view, this one has {n_views}: "
-                             "use coverage \"centre\" or \"pixel\" for several views")
         if settings.coverage == "quad" and self.record:
             raise ValueError("points: the record hook records one pixel a sample, not quad coverage")
         if keys.layers != n_views:

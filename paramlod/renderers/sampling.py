@@ -61,7 +61,7 @@ class PointSettings:
     # cell holds (silhouettes as a triangle's, but rare 1-pixel holes where the surface curves
     # sharply; docs/points.md, "Pixel-centre coverage"), or "quad", the pixels whose centres the
     # quads between neighbouring samples hold (a mesh of the sample grid, rasterized: silhouettes
-    # as its polygon's, single-view frames only; docs/points.md, "Quad coverage")
+    # as its polygon's; docs/points.md, "Quad coverage")
     coverage: str = "pixel"
 
     def validate(self):

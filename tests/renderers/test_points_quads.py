@@ -14,7 +14,6 @@ from paramlod import kernels
 from paramlod.core.layouts import camera_record, cl_prelude
 from paramlod.core.shading import LIGHT
 from paramlod.device.context import cl_device
-from paramlod.errors import SceneError
 from paramlod.function.codegen_cl import cl_dispatch_source
 from paramlod.function.registry import get_function
 from paramlod.renderers.sampling import cover_triangle
@@ -128,11 +127,21 @@ def test_small_glyph_quads_stay_inside_the_silhouette(order):
     assert iou["quad"] >= 0.85, iou
 
 
-def test_quads_refuse_several_views():
+def test_quads_of_several_views_are_the_single_view_frames():
+    """A frame of several views with quad coverage: each view that sees a patch draws its quads
+    into its own layer, so a view that no other asks more detail of is the single-view frame of its
+    camera, bit for bit (keys, depth, ids), and a view that sees nothing stays empty."""
     scene = pl.Scene()
-    scene.add("sphere")
-    cams = [pl.Camera.look_at((x, 0, 3), (0, 0, 0), size=(32, 32)) for x in (-0.2, 0.2)]
+    scene.add("sphere", transform=pl.translate((4, 0, 0)), material=pl.Material((0.8, 0.3, 0.2)))
+    scene.add("torus", transform=pl.translate((-4, 0, 0)) @ pl.rotate(60, (1, 0, 0)))
+    cams = [pl.Camera.look_at((0, 0, 0), d, size=(64, 48), near=0.05, far=50) for d in ((1, 0, 0), (-1, 0, 0), (0, 0, 1))]
     rs = pl.RenderSettings()
     rs.points.coverage = "quad"
-    with pytest.raises(SceneError, match="quad.*one view"):
-        pl.render_views(scene, cams, "points", rs)
+    frames = pl.render_views(scene, cams, "points", rs)
+    for cam, frame in zip(cams[:2], frames):
+        single = pl.render(scene, cam, "points", rs)
+        assert frame.stats["pixels_written"] > 200
+        np.testing.assert_array_equal(frame.rgb8(), single.rgb8())
+        np.testing.assert_array_equal(frame.depth, single.depth)
+        np.testing.assert_array_equal(frame.object_id, single.object_id)
+    assert frames[2].stats["pixels_written"] == 0
