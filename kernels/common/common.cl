@@ -6,6 +6,8 @@
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
 
+#include "common/builtins.cl"
+
 inline float3 xform_point(__global const float* m, float3 p) {
     return (float3)(m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],
                     m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
@@ -37,11 +39,11 @@ inline uint outcode(float4 c) {
 // Unit vector from a view-space point towards the viewer: (0, 0, 1) for an orthographic camera
 // (its projection's last row is (0, 0, 0, 1)), towards the eye for a perspective one.
 inline float3 view_dir(__global const float* cam, float3 e) {
-    return cam[CAM_PROJ + 15] != 0.0f ? (float3)(0.0f, 0.0f, 1.0f) : normalize(-e);
+    return cam[CAM_PROJ + 15] != 0.0f ? (float3)(0.0f, 0.0f, 1.0f) : pl_normalize3(-e);
 }
 
 inline bool is_bad3(float3 p) {
-    return isnan(p.x) || isnan(p.y) || isnan(p.z) || isinf(p.x) || isinf(p.y) || isinf(p.z);
+    return !(pl_finitef(p.x) && pl_finitef(p.y) && pl_finitef(p.z));
 }
 
 // The parameter range a renderer samples of a patch (u0, u1, v0, v1): widened by `widen` of its

@@ -26,9 +26,9 @@ inline uint srgb8(float x) {
         if (SRGB8_THRESHOLDS[k + step] <= x) k += step;
     return k;
 #else
-    uint bucket = x > 0.0f ? (uint)fmin(x * (float)SRGB8_BUCKETS, (float)(SRGB8_BUCKETS - 1)) : 0u;
+    uint bucket = x > 0.0f ? (uint)pl_fminf(x * (float)SRGB8_BUCKETS, (float)(SRGB8_BUCKETS - 1)) : 0u;
     uint k = SRGB8_BUCKET_CODES[bucket];
-    return k + (uint)(k < 255u && SRGB8_THRESHOLDS[min(k + 1u, 255u)] <= x);
+    return k < 255u ? k + (uint)(SRGB8_THRESHOLDS[k + 1u] <= x) : k;
 #endif
 }
 

@@ -12,8 +12,13 @@
 #define PL_SHADING
 
 #ifdef __OPENCL_VERSION__
+#include "common/builtins.cl"
 #define PL_SHADE_FN inline
-#define PL_SHADE_MAX(a, b) fmax((a), (b))
+#define PL_SHADE_MAX(a, b) pl_fmaxf((a), (b))
+#define PL_DOT(a, b) pl_dot3((a), (b))
+#define PL_LENGTH(a) pl_length3(a)
+#define PL_NORMALIZE(a) pl_normalize3(a)
+#define PL_ISNAN(a) ((a) != (a))
 #if PL_SPECULAR_EXPONENT != 48
 #error "common/shading.cl raises to the specular exponent by squaring, written for 48 (paramlod/core/shading.py)"
 #endif
@@ -25,6 +30,10 @@ inline float pl_specular(float ks, float c) {
 #else
 #define PL_SHADE_FN
 #define PL_SHADE_MAX(a, b) max((a), (b))
+#define PL_DOT(a, b) dot((a), (b))
+#define PL_LENGTH(a) length(a)
+#define PL_NORMALIZE(a) normalize(a)
+#define PL_ISNAN(a) isnan(a)
 float pl_specular(float ks, float c) {
     return ks * pow(c, float(PL_SPECULAR_EXPONENT));
 }
@@ -33,17 +42,17 @@ float pl_specular(float ks, float c) {
 // The unit normal facing the viewer: n_view normalized (ev where it degenerates: poles), turned
 // towards ev, the unit vector from the point towards the viewer.
 PL_SHADE_FN vec3 pl_facing_normal(vec3 n_view, vec3 ev) {
-    float ln = length(n_view);
-    vec3 n = (ln > 1e-30f && !isnan(ln)) ? n_view / ln : ev;
-    if (dot(n, ev) < 0.0f) n = -n;
+    float ln = PL_LENGTH(n_view);
+    vec3 n = (ln > 1e-30f && !PL_ISNAN(ln)) ? n_view / ln : ev;
+    if (PL_DOT(n, ev) < 0.0f) n = -n;
     return n;
 }
 
 // Linear RGB (not clamped) for the facing unit normal n, the view vector ev, the material's
 // colour and specular weight ks, and the light record's towards-the-light L and ambient share.
 PL_SHADE_FN vec3 pl_shade_rgb(vec3 n, vec3 ev, vec3 color, float ks, vec3 L, float ambient) {
-    float diff = PL_SHADE_MAX(dot(n, L), 0.0f);
-    float spec = pl_specular(ks, PL_SHADE_MAX(dot(n, normalize(L + ev)), 0.0f));
+    float diff = PL_SHADE_MAX(PL_DOT(n, L), 0.0f);
+    float spec = pl_specular(ks, PL_SHADE_MAX(PL_DOT(n, PL_NORMALIZE(L + ev)), 0.0f));
     return color * (ambient + (1.0f - ambient) * diff) + VEC3(spec, spec, spec);
 }
 #endif

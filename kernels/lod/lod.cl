@@ -74,7 +74,7 @@ inline Sample lod_project(__global const float* cam, float4 w) {
     float4 c = project(cam, e);
     // a finite position can still overflow float32 on its way to clip space (a function returning
     // ~1e38): such a sample is bad like a NaN one, never a reason to split forever
-    if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z) && isfinite(c.w))) {
+    if (!(pl_finitef(c.x) && pl_finitef(c.y) && pl_finitef(c.z) && pl_finitef(c.w))) {
         r.s = (float2)(0.0f, 0.0f); r.state = 2; r.code = 63u; return r;
     }
     r.code = outcode(c);
@@ -93,13 +93,13 @@ inline Sample lod_project(__global const float* cam, float4 w) {
 inline float seg_len(Sample a, Sample b) {
     if (a.state == 2 || b.state == 2) return 0.0f;
     if (a.state == 1 || b.state == 1) return INFINITY;
-    return length(b.s - a.s);
+    return pl_length2(b.s - a.s);
 }
 
 inline void grow_box(float4* box, Sample s) {
     if (s.state != 0) return;
-    box->x = fmin(box->x, s.s.x); box->y = fmin(box->y, s.s.y);
-    box->z = fmax(box->z, s.s.x); box->w = fmax(box->w, s.s.y);
+    box->x = pl_fminf(box->x, s.s.x); box->y = pl_fminf(box->y, s.s.y);
+    box->z = pl_fmaxf(box->z, s.s.x); box->w = pl_fmaxf(box->w, s.s.y);
 }
 
 // How far beyond the measured lines a boundary's need may raise a patch's sample measure (the
@@ -148,13 +148,13 @@ inline bool line_turns(__local const float4* w, uint first, float curve_cos) {
 inline float edge_extrapolate(float a, float b) {
     float t = 1.5f * a;
     float r = t - 0.5f * b;
-    return isfinite(r) ? fmax(r, 0.0f) : 0.0f;
+    return pl_finitef(r) ? pl_fmaxf(r, 0.0f) : 0.0f;
 }
 
 // w = max(s, min(BOUNDARY_CAP * s, BOUNDARY_SHARE * need)), as the twin (paramlod/lod/reference.py).
 inline float raise_measure(float s, float need) {
     float n = BOUNDARY_SHARE * need;
-    return fmax(s, fmin(BOUNDARY_CAP * s, n));
+    return pl_fmaxf(s, pl_fminf(BOUNDARY_CAP * s, n));
 }
 
 inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u1, float v0, float v1, uint inst,
@@ -617,7 +617,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                         n_bad += st[k * 8u + j] == 2 ? 1u : 0u;
                     }
                     float sum = 0.0f, longest = 0.0f;
-                    for (uint j = 0; j < 7u; ++j) { sum += seg[j]; longest = fmax(longest, seg[j]); }
+                    for (uint j = 0; j < 7u; ++j) { sum += seg[j]; longest = pl_fmaxf(longest, seg[j]); }
                     atomic_max(&comb[k], as_uint(sum));
                     // ... while its good part is longer than a pixel: past that, the undefined rest of the
                     // line beside it is sub-pixel too (a finite edge, as a dome's rim, stops splitting there)
@@ -637,7 +637,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                     float longest = 0.0f;
                     for (uint j = 0; j < 4u; ++j) {
                         uint at = first + j * stride;
-                        longest = fmax(longest, seg_len(lod_at(sp, st, at), lod_at(sp, st, at + stride)));
+                        longest = pl_fmaxf(longest, seg_len(lod_at(sp, st, at), lod_at(sp, st, at + stride)));
                     }
                     atomic_max(&vneed[2u * v + (e >> 1)], as_uint(4.0f * longest));
                 }

@@ -24,9 +24,9 @@ inline float4 debug_material(float4 mat, RenderPatch rp, uint color_by) {
 // (paramlod/renderers/sampling.py, PointSettings.factor; the numpy twin is paramlod.renderers.sampling.side_counts).
 // Rounding up and adding one gives at least `factor` steps per pixel; never fewer than 2.
 inline uint side_count(float m, float factor, uint max_side) {
-    float n = ceil(m * factor) + 1.0f;
+    float n = pl_ceilf(m * factor) + 1.0f;
     if (!(n < (float)max_side)) return max_side;  // also catches inf and NaN extents
-    return max((uint)n, 2u);
+    return (uint)n > 2u ? (uint)n : 2u;
 }
 
 // What a patch's sample counts are measured from (`measure`, paramlod/renderers/sampling.py
@@ -64,7 +64,7 @@ inline GridAxis grid_axis(float s, float w, uint boundary, uint wraps, float fac
     fa = fa * (1.0f / 7.0f);
     float fm = s * factor;
     fm = fm * (5.0f / 7.0f);
-    float na = fmax(ceil(fa), 1.0f), nm = fmax(ceil(fm), 1.0f);
+    float na = pl_fmaxf(pl_ceilf(fa), 1.0f), nm = pl_fmaxf(pl_ceilf(fm), 1.0f);
     float n = 2.0f * na + nm + 1.0f;
     if (!(n < (float)max_side) || n >= (float)a.n) return a;   // no cheaper than uniform: uniform
     a.na = (uint)na; a.nm = (uint)nm; a.n = (uint)n; a.wrap = 0u;
@@ -445,10 +445,10 @@ inline uint cover_triangle(QuadVertex a, QuadVertex b, QuadVertex c, __global co
     float area = edge_fn(a.x, a.y, b.x, b.y, c.x, c.y);
     if (!(area != 0.0f)) return 0u;
     uint W = (uint)cam[CAM_W], H = (uint)cam[CAM_H];
-    float x0 = fmax(ceil(fmin(fmin(a.x, b.x), c.x) - 0.5f), 0.0f);
-    float x1 = fmin(floor(fmax(fmax(a.x, b.x), c.x) - 0.5f), (float)W - 1.0f);
-    float y0 = fmax(ceil(fmin(fmin(a.y, b.y), c.y) - 0.5f), 0.0f);
-    float y1 = fmin(floor(fmax(fmax(a.y, b.y), c.y) - 0.5f), (float)H - 1.0f);
+    float x0 = pl_fmaxf(pl_ceilf(pl_fminf(pl_fminf(a.x, b.x), c.x) - 0.5f), 0.0f);
+    float x1 = pl_fminf(pl_floorf(pl_fmaxf(pl_fmaxf(a.x, b.x), c.x) - 0.5f), (float)W - 1.0f);
+    float y0 = pl_fmaxf(pl_ceilf(pl_fminf(pl_fminf(a.y, b.y), c.y) - 0.5f), 0.0f);
+    float y1 = pl_fminf(pl_floorf(pl_fmaxf(pl_fmaxf(a.y, b.y), c.y) - 0.5f), (float)H - 1.0f);
     uint issued = 0u;
     float inv = 1.0f / area;
     for (float py = y0; py <= y1; py += 1.0f) {
@@ -570,9 +570,9 @@ inline QuadRuns quad_runs(uint split, uint nu, uint nv) {
 inline bool quad_may_cover(QuadVertex a, QuadVertex b, QuadVertex c, QuadVertex d) {
     if (a.state || b.state || c.state || d.state) return false;
     if (PL_RUN == 1u) return true;
-    float x0 = fmin(fmin(a.x, b.x), fmin(c.x, d.x)), x1 = fmax(fmax(a.x, b.x), fmax(c.x, d.x));
-    float y0 = fmin(fmin(a.y, b.y), fmin(c.y, d.y)), y1 = fmax(fmax(a.y, b.y), fmax(c.y, d.y));
-    return ceil(x0 - 0.5f) <= floor(x1 - 0.5f) && ceil(y0 - 0.5f) <= floor(y1 - 0.5f);
+    float x0 = pl_fminf(pl_fminf(a.x, b.x), pl_fminf(c.x, d.x)), x1 = pl_fmaxf(pl_fmaxf(a.x, b.x), pl_fmaxf(c.x, d.x));
+    float y0 = pl_fminf(pl_fminf(a.y, b.y), pl_fminf(c.y, d.y)), y1 = pl_fmaxf(pl_fmaxf(a.y, b.y), pl_fmaxf(c.y, d.y));
+    return pl_ceilf(x0 - 0.5f) <= pl_floorf(x1 - 0.5f) && pl_ceilf(y0 - 0.5f) <= pl_floorf(y1 - 0.5f);
 }
 
 // quad_may_cover, then the quad's two triangles (q00, q10, q11) and (q00, q11, q01), one after the

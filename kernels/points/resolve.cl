@@ -49,7 +49,7 @@ void resolve(__global const ulong* color_buf, __global const ulong* aux_buf, uin
                                     (1.0f - fabs(p.x)) * (p.y >= 0.0f ? 1.0f : -1.0f));
                 nn.x = q.x; nn.y = q.y;
             }
-            normal[i] = (float4)(normalize(nn), 0.0f);
+            normal[i] = (float4)(pl_normalize3(nn), 0.0f);
             object_id[i] = (uint)a & 0xFFFu;
             // over the background in linear fixed point (integer only: the twin matches exactly)
             uint al = rgba & 255u;

@@ -1,0 +1,43 @@
+#ifndef PL_BUILTINS
+#define PL_BUILTINS
+// Built-ins of hot code, inline on CPUs. PoCL calls its library's ceil, floor, fmin, fmax, sqrt,
+// isfinite, dot, length and normalize out of line, a call each: a seventh of an order-12 glyph field's quad
+// frame and a tenth of the torus's points frame (perf, 2-core EPYC). Clang's builtins are the same
+// IEEE operations (fmin, fmax: minNum, maxNum; sqrt correctly rounded); dot, length and normalize
+// are written as PoCL computes them (paramlod/meshlod/raster_reference.py, measured), so the
+// results are the same bits.
+#if PL_GPU
+#define pl_ceilf ceil
+#define pl_floorf floor
+#define pl_fminf fmin
+#define pl_fmaxf fmax
+#define pl_sqrtf sqrt
+#define pl_finitef isfinite
+#define pl_dot3 dot
+#define pl_length2 length
+#define pl_length3 length
+#define pl_normalize3 normalize
+#else
+#define pl_ceilf __builtin_ceilf
+#define pl_floorf __builtin_floorf
+#define pl_fminf __builtin_fminf
+#define pl_fmaxf __builtin_fmaxf
+#define pl_sqrtf __builtin_sqrtf
+#define pl_finitef(x) (__builtin_fabsf(x) < INFINITY)   // false for NaN and the infinities
+inline float pl_length2(float2 a) {
+#pragma OPENCL FP_CONTRACT OFF
+    return pl_sqrtf(a.x * a.x + a.y * a.y);
+}
+inline float pl_dot3(float3 a, float3 b) {
+#pragma OPENCL FP_CONTRACT OFF
+    return (a.x * b.x + a.y * b.y) + a.z * b.z;
+}
+inline float pl_length3(float3 a) {
+    return pl_sqrtf(pl_dot3(a, a));
+}
+inline float3 pl_normalize3(float3 a) {
+#pragma OPENCL FP_CONTRACT OFF
+    return a * (1.0f / pl_sqrtf(pl_dot3(a, a)));
+}
+#endif
+#endif
