@@ -1,7 +1,7 @@
 #ifndef PL_BUILTINS
 #define PL_BUILTINS
 // Built-ins of hot code, inline on CPUs. PoCL calls its library's ceil, floor, fmin, fmax, sqrt,
-// isfinite, dot, length and normalize out of line, a call each: a seventh of an order-12 glyph field's quad
+// fabs, isfinite, dot, length and normalize out of line, a call each: a seventh of an order-12 glyph field's quad
 // frame and a tenth of the torus's points frame (perf, 2-core EPYC). Clang's builtins are the same
 // IEEE operations (fmin, fmax: minNum, maxNum; sqrt correctly rounded); dot, length and normalize
 // are written as PoCL computes them (paramlod/meshlod/raster_reference.py, measured), so the
@@ -12,6 +12,7 @@
 #define pl_fminf fmin
 #define pl_fmaxf fmax
 #define pl_sqrtf sqrt
+#define pl_fabsf fabs
 #define pl_finitef isfinite
 #define pl_dot3 dot
 #define pl_length2 length
@@ -23,7 +24,8 @@
 #define pl_fminf __builtin_fminf
 #define pl_fmaxf __builtin_fmaxf
 #define pl_sqrtf __builtin_sqrtf
-#define pl_finitef(x) (__builtin_fabsf(x) < INFINITY)   // false for NaN and the infinities
+#define pl_fabsf __builtin_fabsf
+#define pl_finitef(x) (pl_fabsf(x) < INFINITY)   // false for NaN and the infinities
 inline float pl_length2(float2 a) {
 #pragma OPENCL FP_CONTRACT OFF
     return pl_sqrtf(a.x * a.x + a.y * a.y);

@@ -34,14 +34,15 @@ inline uint srgb8(float x) {
 
 inline uint oct10(float3 n) {
     // octahedral map of a unit vector to two 10-bit unsigned values
-    float s = fabs(n.x) + fabs(n.y) + fabs(n.z);
+    float s = pl_fabsf(n.x) + pl_fabsf(n.y) + pl_fabsf(n.z);
     float2 p = n.xy / s;
     if (n.z < 0.0f) {
-        p = (float2)((1.0f - fabs(p.y)) * (p.x >= 0.0f ? 1.0f : -1.0f),
-                     (1.0f - fabs(p.x)) * (p.y >= 0.0f ? 1.0f : -1.0f));
+        p = (float2)((1.0f - pl_fabsf(p.y)) * (p.x >= 0.0f ? 1.0f : -1.0f),
+                     (1.0f - pl_fabsf(p.x)) * (p.y >= 0.0f ? 1.0f : -1.0f));
     }
-    uint x = (uint)clamp(p.x * 511.5f + 511.5f + 0.5f, 0.0f, 1023.0f);
-    uint y = (uint)clamp(p.y * 511.5f + 511.5f + 0.5f, 0.0f, 1023.0f);
+    // clamp(v, 0, 1023) as the standard defines it, fmin(fmax(v, 0), 1023)
+    uint x = (uint)pl_fminf(pl_fmaxf(p.x * 511.5f + 511.5f + 0.5f, 0.0f), 1023.0f);
+    uint y = (uint)pl_fminf(pl_fmaxf(p.y * 511.5f + 511.5f + 0.5f, 0.0f), 1023.0f);
     return (x << 10) | y;
 }
 
