@@ -48,9 +48,9 @@ inline bool splat_box(ulong gid, uint K, uint tiles, uint count, uint* item, uin
 }
 
 inline float box_dist2(float4 lo, float4 hi, float4 p) {
-    float bx = fmax(fmax(lo.x - p.x, 0.0f), p.x - hi.x);
-    float by = fmax(fmax(lo.y - p.y, 0.0f), p.y - hi.y);
-    float bz = fmax(fmax(lo.z - p.z, 0.0f), p.z - hi.z);
+    float bx = pl_fmaxf(pl_fmaxf(lo.x - p.x, 0.0f), p.x - hi.x);
+    float by = pl_fmaxf(pl_fmaxf(lo.y - p.y, 0.0f), p.y - hi.y);
+    float bz = pl_fmaxf(pl_fmaxf(lo.z - p.z, 0.0f), p.z - hi.z);
     return (bx * bx + by * by) + bz * bz;
 }
 
@@ -59,7 +59,7 @@ inline float box_dist2(float4 lo, float4 hi, float4 p) {
 inline bool tile_pixels(float2 c, int half_box, uint tx, uint ty, uint W, uint H, uint k,
                         __global const float4* tile_lo, __global const float4* tile_hi,
                         float4 p, float r2, int* x0, int* y0, int* x1, int* y1) {
-    int bx = (int)floor(c.x), by = (int)floor(c.y);
+    int bx = (int)pl_floorf(c.x), by = (int)pl_floorf(c.y);
     int bx0 = max(bx - half_box, 0), by0 = max(by - half_box, 0);
     int bx1 = min(bx + half_box, (int)W - 1), by1 = min(by + half_box, (int)H - 1);
     if (bx0 > bx1 || by0 > by1) return false;
@@ -146,7 +146,7 @@ __kernel void conflict_splat(__global const float4* pos, uint W, uint H, uint K,
     ulong key = cand[s];
     float r2 = as_float((uint)(key >> 32));
     if (!(r2 >= thr2 && r2 > 0.0f)) return;
-    int half_box = (int)ceil(sqrt(r2) * scale) + 3;
+    int half_box = (int)pl_ceilf(pl_sqrtf(r2) * scale) + 3;
     float4 pc = pos[(uint)key];
     float2 c = layer_xy(pc, cx, cy, cz, layers + 8 * k, scale, 0.5f * (float)W, 0.5f * (float)H);
     int x0, y0, x1, y1;

@@ -70,16 +70,21 @@ def ortho_matrix(views: ViewSet) -> np.ndarray:
 
 
 class MeshRasterizer:
-    """A triangle soup uploaded once, drawn into float render targets with any view/projection."""
+    """A triangle soup uploaded once, drawn into float render targets with any view/projection:
+    the corners' positions as vertices, and each triangle's corners (positions, normals, colours;
+    std430 vec4s) in a storage buffer its fragments read (kernels/surfels/surfels_gbuffer_frag.glsl)."""
 
     def __init__(self, soup: TriangleSoup):
         self.ctx = ctx = gl_context()
         self.program = ctx.program(vertex_shader=kernels.source("surfels/surfels_gbuffer_vert.glsl"),
-                                   geometry_shader=kernels.source("surfels/surfels_gbuffer_geom.glsl"),
                                    fragment_shader=kernels.source("surfels/surfels_gbuffer_frag.glsl"))
-        data = np.concatenate([soup.positions, soup.normals, soup.colors], axis=2).astype(np.float32)
-        self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
-        self.vao = ctx.vertex_array(self.program, [(self.vbo, "3f 3f 4f", "in_pos", "in_nrm", "in_col")])
+        corners = np.zeros((soup.face_count, 9, 4), np.float32)
+        corners[:, 0:3, :3] = soup.positions
+        corners[:, 3:6, :3] = soup.normals
+        corners[:, 6:9] = soup.colors
+        self.vbo = ctx.buffer(np.ascontiguousarray(soup.positions, np.float32).tobytes())
+        self.triangles = ctx.buffer(corners.tobytes())
+        self.vao = ctx.vertex_array(self.program, [(self.vbo, "3f", "in_pos")])
         self._fbo = None
 
     def _targets(self, w, h):
@@ -101,6 +106,8 @@ class MeshRasterizer:
         mvp = (proj @ view).astype(np.float32)
         self.program["u_mvp"].write(np.ascontiguousarray(mvp.T).tobytes())  # GLSL is column-major
         self.program["u_dir"].value = tuple(float(x) for x in direction)
+        self.program["u_size"].value = (float(w), float(h))
+        self.triangles.bind_to_storage_buffer(0)
         with self.ctx.scope(fbo, enable_only=moderngl.DEPTH_TEST):
             fbo.viewport = (0, 0, w, h)
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -121,6 +128,7 @@ class MeshRasterizer:
             self.release_targets()
         self.vao.release()
         self.vbo.release()
+        self.triangles.release()
         self.program.release()
 
 
