@@ -152,7 +152,8 @@ def _cl_float(x) -> str:
 
 
 def cl_tables() -> str:
-    """The sRGB part of the OpenCL prelude: SRGB8_DECODED and SRGB8_THRESHOLDS."""
+    """The sRGB part of the OpenCL prelude: SRGB8_DECODED, SRGB8_THRESHOLDS, SRGB8_BUCKETS and
+    SRGB8_BUCKET_CODES."""
     lines = ["// sRGB (paramlod/core/color.py): each 8-bit code's linear value, the encoder's thresholds",
              "// and its code at the start of each of SRGB8_BUCKETS buckets of [0, 1]",
              f"#define SRGB8_BUCKETS {SRGB8_BUCKETS}"]

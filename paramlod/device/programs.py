@@ -54,7 +54,7 @@ def build(files: list[str], defines: dict | None = None, options: tuple = (), ge
     table) + kernels/common/common.cl + ``generated`` + ``files`` (paths in kernels/);
     ``options`` are extra compiler options; ``describe`` names the generated code's sources in
     the error a failed compile raises. Every program gets ``PL_GPU`` (1 on a GPU, else 0) for
-    code whose fastest form differs between the two (keys.cl's srgb8)."""
+    code whose fastest form differs between the two (kernels/common/builtins.cl, keys.cl's srgb8)."""
     prelude = cl_prelude()
     for name in defines or {}:   # a -D the prelude defines again would be silently overridden
         if re.search(rf"^#define {name}\b", prelude, re.M) or name == "PL_GPU":
