@@ -549,7 +549,12 @@ inline Runs patch_runs(uint split, uint nu, uint nv) {
 #define PL_QUADS 0
 #endif
 #define PL_QUAD_LINES (PL_RUN > 1u ? 4u : 1u)
-#define PL_QUAD_STEPS (PL_RUN > 1u ? PL_RUN - 1u : 1u)   // CPUs: 15 steps, 16 corners down a line, two vectors
+// CPUs: runs of 15 steps (16 corners down a line, two vectors), or 31 (four) down the lines of a
+// function's surface split, whose steps of one parameter a work-item evaluates once per line and
+// run: the order-12 glyph field's quad render 40-43 -> 34-35 ms (2-core EPYC); without a split the
+// longer runs were no faster (the torus 22-24 -> 23-26 ms)
+#define PL_QUAD_STEPS (PL_RUN > 1u ? PL_RUN - 1u : 1u)
+#define PL_QUAD_STEPS_SPLIT (PL_RUN > 1u ? 2u * PL_RUN - 1u : 1u)
 typedef struct { uint split, na, nb, blocks, runs, len; } QuadRuns;
 
 inline QuadRuns quad_runs(uint split, uint nu, uint nv) {
@@ -558,7 +563,8 @@ inline QuadRuns quad_runs(uint split, uint nu, uint nv) {
     r.na = r.split == PL_SPLIT_V ? nv : nu;
     r.nb = r.split == PL_SPLIT_V ? nu : nv;
     r.blocks = (r.na - 1u + PL_QUAD_LINES - 1u) / PL_QUAD_LINES;   // side counts are >= 2
-    r.runs = (r.nb - 1u + PL_QUAD_STEPS - 1u) / PL_QUAD_STEPS;
+    uint steps = r.split ? PL_QUAD_STEPS_SPLIT : PL_QUAD_STEPS;
+    r.runs = (r.nb - 1u + steps - 1u) / steps;
     r.len = (r.nb - 1u + r.runs - 1u) / r.runs;
     return r;
 }
@@ -707,7 +713,7 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                     __global ulong* color_view = color_buf + view * layer_pixels;
                     __global ulong* aux_view = aux_buf + view * layer_pixels;
 #ifdef PL_VECTOR   // CPUs: each line's corners evaluated PL_VW at a time, then the quads drawn
-                    QuadVertex qv[PL_QUAD_LINES + 1u][PL_QUAD_STEPS + 1u];
+                    QuadVertex qv[PL_QUAD_LINES + 1u][PL_QUAD_STEPS_SPLIT + 1u];
                     uint nb = b1 - b0 + 1u;   // corners down each line
                     for (uint k = 0u; k < lines; ++k) {
                         for (uint j0 = 0u; j0 < nb; j0 += PL_VW) {
