@@ -137,10 +137,10 @@ class CLPrinter(C99CodePrinter):
             out = f"{self.names[which]}({out}, {a})"
         return out
 
-    def _print__Sqrt(self, expr):
+    def _print_SqrtOf(self, expr):
         return f"{self.names['sqrt']}({self._print(expr.args[0])})"
 
-    def _print__Rsqrt(self, expr):
+    def _print_RsqrtOf(self, expr):
         return f"{self.names['rsqrt']}({self._print(expr.args[0])})"
 
     def _print_Min(self, expr):
@@ -157,7 +157,7 @@ def cl_expr(expr) -> str:
     return _printer.doprint(expr)
 
 
-def _print_checked(printer: CLPrinter, expr, fn: ParametricFunction) -> str:
+def print_checked(printer: CLPrinter, expr, fn: ParametricFunction) -> str:
     try:
         return printer.doprint(expr)
     except PrintMethodNotImplementedError as exc:
@@ -175,12 +175,12 @@ def param_lines(fn: ParametricFunction, printer: CLPrinter = _printer) -> list[s
 
 
 # --- lowering: one shared program per call --------------------------------------------------------
-class _Sqrt(sp.Function):
+class SqrtOf(sp.Function):
     """sqrt(x) kept as one node, so that CSE shares it between x**(1/2) and x**(3/2) = x*sqrt(x)."""
     nargs = 1
 
 
-class _Rsqrt(sp.Function):
+class RsqrtOf(sp.Function):
     """1/sqrt(x) as one node: x**(-3/2) = rsqrt(x)**3 shares the rsqrt of x**(-1/2) (the derivative
     of a normalisation), where ``pow(x, 1.5f)`` in a denominator costs a pow and a division."""
     nargs = 1
@@ -189,8 +189,8 @@ class _Rsqrt(sp.Function):
 def _half_power(p):
     n = int(p.exp.p)  # exponent n/2, n odd
     if n > 0:
-        return p.base ** ((n - 1) // 2) * _Sqrt(p.base)
-    return _Rsqrt(p.base) ** (-n)
+        return p.base ** ((n - 1) // 2) * SqrtOf(p.base)
+    return RsqrtOf(p.base) ** (-n)
 
 
 def _prepare(e):
@@ -331,7 +331,7 @@ def function_body(fn: ParametricFunction, exprs, printer: CLPrinter = _printer,
     with ``fn.program("position")`` or ``fn.program("surface")``.
     """
     low = lower(exprs, bindings, optimize=optimize, sincos=sincos)
-    return step_lines(fn, low.steps, printer), [_print_checked(printer, e, fn) for e in low.outputs]
+    return step_lines(fn, low.steps, printer), [print_checked(printer, e, fn) for e in low.outputs]
 
 
 def step_lines(fn: ParametricFunction, steps, printer: CLPrinter = _printer) -> list[str]:
@@ -340,11 +340,11 @@ def step_lines(fn: ParametricFunction, steps, printer: CLPrinter = _printer) -> 
     for step in steps:
         if isinstance(step, SinCos):
             lines.append(f"    {printer.local_type} {step.c};")
-            lines.append(f"    {printer.local_decl} {step.s} = sincos({_print_checked(printer, step.arg, fn)}, &{step.c});")
+            lines.append(f"    {printer.local_decl} {step.s} = sincos({print_checked(printer, step.arg, fn)}, &{step.c});")
         else:
             sym, e = step
             decl = printer.bool_decl if isinstance(e, sp.logic.boolalg.Boolean) else printer.local_decl
-            lines.append(f"    {decl} {printer.doprint(sym)} = {_print_checked(printer, e, fn)};")
+            lines.append(f"    {decl} {printer.doprint(sym)} = {print_checked(printer, e, fn)};")
     return lines
 
 
@@ -409,7 +409,7 @@ def check_printable(fn: ParametricFunction) -> None:
     if fn.exprs is None:
         return
     for e in [*fn.exprs, *(e for _, e in fn.bindings)]:
-        _print_checked(_printer, e, fn)
+        print_checked(_printer, e, fn)
 
 
 def snippet_body(fn: ParametricFunction, scalar_load: str) -> str:
@@ -517,12 +517,12 @@ def position_split(fn: ParametricFunction) -> SplitSurface | None:
 
 
 def _position_source(fn, head: str, lines, outputs) -> str:
-    x, y, z = (_print_checked(_printer, e, fn) for e in outputs)
+    x, y, z = (print_checked(_printer, e, fn) for e in outputs)
     return f"inline float3 {head} {{\n" + "\n".join(lines) + f"\n    return (float3)({x}, {y}, {z});\n}}\n"
 
 
 def _surface_source(fn, head: str, lines, outputs) -> str:
-    r = [_print_checked(_printer, e, fn) for e in outputs]
+    r = [print_checked(_printer, e, fn) for e in outputs]
     return (f"inline void {head} float3* pos, float3* du, float3* dv) {{\n" + "\n".join(lines)
             + f"\n    *pos = (float3)({r[0]}, {r[1]}, {r[2]});"
             + f"\n    *du = (float3)({r[3]}, {r[4]}, {r[5]});"

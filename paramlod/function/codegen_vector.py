@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from paramlod.function.codegen_cl import (CLPrinter, SinCos, _print_checked, _Rsqrt, _Sqrt, param_lines, step_lines,
+from paramlod.function.codegen_cl import (CLPrinter, SinCos, print_checked, RsqrtOf, SqrtOf, param_lines, step_lines,
                                           surface_lowered, surface_split)
 from paramlod.function.define import ParametricFunction
 
@@ -56,7 +56,7 @@ VECTOR_NODES = (sp.Symbol, sp.Number, sp.NumberSymbol, sp.Add, sp.Mul, sp.Pow, s
                 sp.asin, sp.acos, sp.atan, sp.atan2, sp.sinh, sp.cosh, sp.tanh, sp.exp, sp.log, sp.Abs,
                 sp.Min, sp.Max, sp.floor, sp.ceiling, sp.sign, sp.Piecewise, sp.functions.elementary.piecewise.ExprCondPair,
                 sp.core.relational.Relational, sp.And, sp.Or, sp.Not, sp.logic.boolalg.BooleanAtom,
-                sp.Heaviside, sp.Mod, sp.frac, _Sqrt, _Rsqrt)
+                sp.Heaviside, sp.Mod, sp.frac, SqrtOf, RsqrtOf)
 
 
 def _vector_ready(fn: ParametricFunction, steps, outputs) -> bool:
@@ -65,7 +65,7 @@ def _vector_ready(fn: ParametricFunction, steps, outputs) -> bool:
 
 
 def _outputs(fn: ParametricFunction, outputs) -> str:
-    return "".join(f"\n    o[{k}] = {_print_checked(_vprinter, e, fn)};" for k, e in enumerate(outputs))
+    return "".join(f"\n    o[{k}] = {print_checked(_vprinter, e, fn)};" for k, e in enumerate(outputs))
 
 
 def _vector_function(fn: ParametricFunction, index: int) -> tuple[str, bool] | None:
