@@ -541,10 +541,11 @@ inline Runs patch_runs(uint split, uint nu, uint nv) {
 }
 
 // Quad coverage (PL_QUADS): a work-item draws the quads of a block of up to PL_QUAD_LINES strips
-// between neighbouring grid lines (lines as patch_runs orders them), for a run of up to PL_RUN
-// steps down them, keeping the last column of corners: each corner is evaluated once per block
-// and run, not four times. All nu_grid x nv_grid samples are corners (a wrapping axis's repeated
-// line closes the seam). GPUs (PL_RUN 1): one quad a work-item, its four corners evaluated.
+// between neighbouring grid lines (lines as patch_runs orders them), for a run of up to
+// PL_QUAD_STEPS (PL_QUAD_STEPS_SPLIT) steps down them, keeping the last column of corners: each
+// corner is evaluated once per block and run, not four times. All nu_grid x nv_grid samples are
+// corners (a wrapping axis's repeated line closes the seam). GPUs (PL_RUN 1): one quad a
+// work-item, its four corners evaluated.
 #ifndef PL_QUADS
 #define PL_QUADS 0
 #endif
