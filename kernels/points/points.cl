@@ -138,8 +138,8 @@ inline float grid_at(float x0, float x1, uint n, uint na, float a, float m, uint
     return (x0 + a * (float)na) + m * (float)(i - na);             // middle
 }
 
-// Grid line i of g across a run (patch_runs, quad_runs): its u, or its v for a split along v, in a
-// grid of nu x nv samples.
+// Index i of g's nu x nv grid along u, or along v for PL_SPLIT_V: with a run's split, the run's
+// grid line (patch_runs, quad_runs); with the other axis, a sample down that line (line_lanes).
 inline float line_at(PointGrid g, uint split, uint nu, uint nv, uint i) {
     return split == PL_SPLIT_V ? grid_at(g.v0, g.v1, nv, g.nav, g.av, g.sv, i) : grid_at(g.u0, g.u1, nu, g.nau, g.au, g.su, i);
 }
@@ -382,11 +382,9 @@ inline SurfaceLanes surface_lanes(uint func, __global const float* P, __global c
 // parameter `a` across the split's axis (u, or v for a split along v), samples ib .. ib + PL_VW - 1
 // of the nu x nv grid along it, lanes past `last` repeating sample `last`; as grid_at gives them.
 inline void line_lanes(PointGrid g, uint split, uint nu, uint nv, float a, uint ib, uint last, plv* u, plv* v) {
+    uint along = split == PL_SPLIT_V ? PL_SPLIT_U : PL_SPLIT_V;   // the line's own parameter
     float b[PL_VW];
-    for (uint l = 0u; l < PL_VW; ++l) {
-        uint i = min(ib + l, last);
-        b[l] = split == PL_SPLIT_V ? grid_at(g.u0, g.u1, nu, g.nau, g.au, g.su, i) : grid_at(g.v0, g.v1, nv, g.nav, g.av, g.sv, i);
-    }
+    for (uint l = 0u; l < PL_VW; ++l) b[l] = line_at(g, along, nu, nv, min(ib + l, last));
     plv bv = pl_vload(0, b);
     *u = split == PL_SPLIT_V ? bv : (plv)a;
     *v = split == PL_SPLIT_V ? (plv)a : bv;
