@@ -148,6 +148,43 @@ def test_a_real_paramlod_row(tmp_path):
     assert "| torus | paramlod |" in (tmp_path / "peers.md").read_text()
 
 
+def test_rounds_take_turns_and_give_each_rounds_ratio(tmp_path, monkeypatch):
+    """--peers-rounds: paramlod's rows, then the peers', then again; a row's time is the median of
+    its rounds, and the matched table gives the ratio of each round (times taken minutes apart)."""
+    spec = P.scene_spec("torus", (64, 64))
+    ref, _ = P.reference_silhouette(spec)
+    calls, times = [], iter([10.0, 30.0, 20.0])   # paramlod's row, round by round
+    peer_times = iter([(4.0, 8.0), (9.0, 18.0), (5.0, 10.0)])   # pyvista's mesh 32 / 64, round by round
+
+    def paramlod_row(spec, variant, frames, warmup, field, threshold):
+        calls.append("paramlod")
+        return {"tool": "paramlod", "version": "0", "variant": variant, "threshold": threshold, "ms": next(times),
+                "mask": ref}
+
+    def worker(tool, job):
+        calls.append(tool)
+        a, b = next(peer_times)
+        rows = [{"scene": "torus", "resolution": 32, "ms": a, "mask": "m32"},
+                {"scene": "torus", "resolution": 64, "ms": b, "mask": "m64"}]
+        return rows, {"m32": ref, "m64": ref}
+
+    monkeypatch.setattr(P, "PARAMLOD_ROWS", {"points": "points"})
+    monkeypatch.setattr(P, "paramlod_render_row", paramlod_row)
+    monkeypatch.setattr(P, "run_worker", worker)
+    monkeypatch.setattr(P.importlib.util, "find_spec", lambda name: object() if name == "pyvista" else None)
+    monkeypatch.setattr(P, "peer_versions", lambda tool: "test")
+    result = P.run_peers(_args("--peers-tools", "paramlod", "pyvista", "--peers-scenes", "torus", "--peers-size",
+                               "64x64", "--peers-rounds", "3", "--peers-samples"), tmp_path, log=lambda m: None)
+    assert calls == ["paramlod", "pyvista"] * 3
+    rows = {(r["tool"], r["variant"]): r for r in result["render"]}
+    assert rows["paramlod", "points"]["ms"] == 20.0 and rows["paramlod", "points"]["ms_rounds"] == [10.0, 30.0, 20.0]
+    assert rows["pyvista", "mesh 32"]["ms"] == 5.0 and rows["pyvista", "mesh 64"]["ms_rounds"] == [8.0, 18.0, 10.0]
+    # the same error everywhere: the closest resolution is the smaller, mesh 32; per round 4/10, 9/30, 5/20
+    assert [m["ratio"] for ms in result["matched_rounds"] for m in ms] == [0.4, 0.3, 0.25]
+    md = (tmp_path / "peers.md").read_text()
+    assert "the median of 3 rounds" in md and "| (0.40) / (0.30) / (0.25) |" in md
+
+
 # --- real peers: run where they are importable (pip install 'paramlod[peers]'), skipped elsewhere -----------
 # Through the bench's worker subprocess, as the bench runs them: a peer's GL or Vulkan libraries
 # loaded into this process broke every later OpenGL test (moderngl: "cannot create buffer").

@@ -88,6 +88,10 @@ def add_arguments(p):
     p.add_argument("--peers-size", type=parse_size, default=(640, 640), metavar="WxH",
                    help="--peers: frame size, square (default 640x640)")
     p.add_argument("--peers-frames", type=positive_int, default=5, help="--peers: timed frames per row (default 5)")
+    p.add_argument("--peers-rounds", type=positive_int, default=1,
+                   help="--peers: rounds of every render row, paramlod's then the peers' in turn, so that a slow "
+                        "spell of a shared machine reaches both; a row's time is the median of its rounds and "
+                        "each ratio is given per round (default 1)")
     p.add_argument("--peers-scenes", nargs="+", choices=SCENES, default=list(SCENES),
                    help="--peers: scenes (default all: glyphs8 glyphs12 torus torus-close)")
     p.add_argument("--peers-tools", nargs="+", choices=["paramlod", *PEERS], default=["paramlod", *PEERS],
@@ -566,6 +570,17 @@ def matched(rows: list) -> list:
     return out
 
 
+def merge_rounds(per_round: list) -> list:
+    """The render rows of several rounds as one row each (the first round's, in its order): ``ms``
+    the median of the rounds' times, ``ms_rounds`` each round's."""
+    out = []
+    for r in per_round[0]:
+        same = [x for rows in per_round for x in rows
+                if (x["tool"], x["scene"], x["variant"]) == (r["tool"], r["scene"], r["variant"])]
+        out.append(dict(r, ms=statistics.median(x["ms"] for x in same), ms_rounds=[x["ms"] for x in same]))
+    return out
+
+
 def run_peers(args, out_dir, log=print) -> dict:
     """The comparison (module docstring); writes out_dir/peers.json and peers.md atomically."""
     out_dir = Path(out_dir)
@@ -588,27 +603,15 @@ def run_peers(args, out_dir, log=print) -> dict:
             present[t] = PEERS[t][3]
     specs = [scene_spec(s, size, args.peers_grid) for s in args.peers_scenes]
     renderers = [t for t, kind in present.items() if kind == "render"]
-    refs = {}
+    refs, fields = {}, {}
     if specs and ("paramlod" in tools or renderers):
         for spec in specs:
-            field = glyph_field(spec["order"], spec["grid"]) if spec["kind"] == "glyphs" else None
-            refs[spec["name"]], result["references"][spec["name"]] = reference_silhouette(spec, field)
+            fields[spec["name"]] = glyph_field(spec["order"], spec["grid"]) if spec["kind"] == "glyphs" else None
+            refs[spec["name"]], result["references"][spec["name"]] = reference_silhouette(spec, fields[spec["name"]])
             info = result["references"][spec["name"]]
             log(f"reference {spec['name']}: {info['vertices']:,} vertices, edges <= {info['max_edge_px']:.2f} px, "
                 f"{refs[spec['name']].sum():,} pixels covered ({info['seconds']:.1f} s)")
-            if "paramlod" in tools:
-                for variant, t in ((v, t) for t in args.peers_thresholds for v in PARAMLOD_ROWS):
-                    try:
-                        r = paramlod_render_row(spec, variant, frames, warmup, field, t)
-                    except ParamlodError as exc:
-                        result["failed"].append({"tool": "paramlod", "scene": spec["name"], "variant": variant,
-                                                 "status": str(exc)})
-                        continue
-                    r["error"] = silhouette_error(r.pop("mask"), refs[spec["name"]])
-                    r["scene"] = spec["name"]
-                    result["render"].append(r)
-                    log(f"paramlod {r['variant']} {spec['name']}: {r['ms']:.1f} ms, error {r['error']:.3f}")
-                    save()
+
     def worker_rows(tool, job):
         """The worker's rows and arrays, or None once its failure is recorded and logged."""
         got = run_worker(tool, job)
@@ -618,17 +621,41 @@ def run_peers(args, out_dir, log=print) -> dict:
             return None
         return got
 
-    for tool in renderers:
-        got = worker_rows(tool, {"scenes": specs, "frames": frames, "warmup": warmup})
-        if got is None:
-            continue
-        rows, arrays = got
-        for r in rows:
-            r.update(tool=tool, version=peer_versions(tool), variant=f"mesh {r['resolution']}",
-                     error=silhouette_error(arrays[r.pop("mask")], refs[r["scene"]]))
-            result["render"].append(r)
-            log(f"{tool} {r['scene']} {r['variant']}: {r['ms']:.1f} ms, error {r['error']:.3f}")
+    rounds = args.peers_rounds if specs and ("paramlod" in tools or renderers) else 0
+    result["rounds"] = rounds
+    per_round = []   # each round's rows: the ratios of one round come from times taken minutes apart at most
+    for k in range(rounds):
+        mark = f" (round {k + 1} of {rounds})" if rounds > 1 else ""
+        rows = []
+        for spec in specs if "paramlod" in tools else ():
+            for variant, t in ((v, t) for t in args.peers_thresholds for v in PARAMLOD_ROWS):
+                try:
+                    r = paramlod_render_row(spec, variant, frames, warmup, fields[spec["name"]], t)
+                except ParamlodError as exc:
+                    if k == 0:
+                        result["failed"].append({"tool": "paramlod", "scene": spec["name"], "variant": variant,
+                                                 "status": str(exc)})
+                    continue
+                r["error"] = silhouette_error(r.pop("mask"), refs[spec["name"]])
+                r["scene"] = spec["name"]
+                rows.append(r)
+                log(f"paramlod {r['variant']} {spec['name']}: {r['ms']:.1f} ms, error {r['error']:.3f}{mark}")
+        for tool in renderers:
+            got = worker_rows(tool, {"scenes": specs, "frames": frames, "warmup": warmup}) if k == 0 or any(
+                r["tool"] == tool for r in per_round[0]) else None
+            if got is None:
+                continue
+            worker, arrays = got
+            for r in worker:
+                r.update(tool=tool, version=peer_versions(tool), variant=f"mesh {r['resolution']}",
+                         error=silhouette_error(arrays[r.pop("mask")], refs[r["scene"]]))
+                rows.append(r)
+                log(f"{tool} {r['scene']} {r['variant']}: {r['ms']:.1f} ms, error {r['error']:.3f}{mark}")
+        per_round.append(rows)
+        result["render"] = merge_rounds(per_round)
         save()
+    if rounds > 1:
+        result["matched_rounds"] = [matched(rows) for rows in per_round]
     result["matched"] = matched(result["render"])
     counts = list(args.peers_samples)
     samplers = [t for t, kind in present.items() if kind == "sample"]
@@ -660,23 +687,32 @@ def run_peers(args, out_dir, log=print) -> dict:
 
 def format_peers_markdown(result: dict) -> str:
     w, h = result["size"]
-    lines = [f"{w}x{h}; time: warm median of {result['frames']} frames (render and read the image back), ms; "
-             "silhouette error: 1 - IoU against the dense analytic silhouette."]
+    lines = [f"{w}x{h}; time: warm median of {result['frames']} frames (render and read the image back), ms"
+             + (f", the median of {result['rounds']} rounds" if result.get("rounds", 1) > 1 else "")
+             + "; silhouette error: 1 - IoU against the dense analytic silhouette."]
     if result["render"]:
         lines += ["", "| scene | tool | version | variant | ms per frame | silhouette error |", "|---|---|---|---|---:|---:|"]
         for r in result["render"]:
             lines.append(f"| {r['scene']} | {r['tool']} | {r.get('version', '')} | {r['variant']} | {r['ms']:.1f} "
                          f"| {r['error']:.3f} |")
+    rounds = {}   # (scene, paramlod row, peer) -> each round's ratio at paramlod's error (else, bracketed, closest)
+    for ms in result.get("matched_rounds", []):
+        for m in ms:
+            at = m["ratio_at_error"]
+            rounds.setdefault((m["scene"], m["paramlod"], m["peer"]), []).append(
+                f"{at:.2f}" if at is not None else f"({m['ratio']:.2f})")
     if result.get("matched"):
         lines += ["", "At matched silhouette error (the peer's mesh resolution whose error is closest to paramlod's; "
                       "then the peer's time interpolated at paramlod's error between its two resolutions around it, "
                       "log time against log error, - outside their range):", "",
                   "| scene | paramlod | ms | error | peer | resolution | peer ms | peer error | peer ms / paramlod ms "
-                  "| peer ms at paramlod's error | ratio there |",
-                  "|---|---|---:|---:|---|---:|---:|---:|---:|---:|---:|"]
+                  "| peer ms at paramlod's error | ratio there |" + (" per round |" if rounds else ""),
+                  "|---|---|---:|---:|---|---:|---:|---:|---:|---:|---:|" + ("---|" if rounds else "")]
         for m in result["matched"]:
             at = m.get("peer_ms_at_error")
             there = "- | -" if at is None else f"{at:.1f} | {m['ratio_at_error']:.2f}"
+            if rounds:
+                there += " | " + " / ".join(rounds.get((m["scene"], m["paramlod"], m["peer"]), []))
             lines.append(f"| {m['scene']} | {m['paramlod']} | {m['paramlod_ms']:.1f} | {m['paramlod_error']:.3f} | "
                          f"{m['peer']} | {m['resolution']} | {m['peer_ms']:.1f} | {m['peer_error']:.3f} | "
                          f"{m['ratio']:.2f} | {there} |")
