@@ -640,10 +640,10 @@ def run_peers(args, out_dir, log=print) -> dict:
                 r["scene"] = spec["name"]
                 rows.append(r)
                 log(f"paramlod {r['variant']} {spec['name']}: {r['ms']:.1f} ms, error {r['error']:.3f}{mark}")
-        for tool in renderers:
-            got = worker_rows(tool, {"scenes": specs, "frames": frames, "warmup": warmup}) if k == 0 or any(
-                r["tool"] == tool for r in per_round[0]) else None
-            if got is None:
+        for tool in list(renderers):
+            got = worker_rows(tool, {"scenes": specs, "frames": frames, "warmup": warmup})
+            if got is None:   # failed, and said so once: not run again in a later round
+                renderers.remove(tool)
                 continue
             worker, arrays = got
             for r in worker:
