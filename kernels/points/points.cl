@@ -590,105 +590,37 @@ inline uint cover_quad(QuadVertex q00, QuadVertex q10, QuadVertex q01, QuadVerte
     return issued + cover_triangle(q00, q11, q01, cam, mat, light, object_id, color_buf, aux_buf);
 }
 
-// Occlusion tiles (kernels/points/occlusion.cl): each direction's N grid lines of a render patch (a
-// wrapping axis's repeated line included) cut into t = tiles_along(N) tiles, tile k holding lines
-// [k N / t, (k + 1) N / t). A frame drawn with occlusion culling lists a patch with a mask of the
-// tiles to draw (bit ty * tu + tx); other frames draw each patch as one tile. A tile's samples are
-// those of its lines; its quads those whose first corner is on its lines.
-#define OCC_TILE 8u    // lines a tile side, about
-#ifndef PL_OCC_TILES   // tiles a side at most, per device (paramlod/renderers/occlusion.py max_tiles); a mask is 64 bits
-#define PL_OCC_TILES 8u
-#endif
-inline uint tiles_along(uint n) { return clamp((n + OCC_TILE - 1u) / OCC_TILE, 1u, (uint)PL_OCC_TILES); }
-
-// First sample (quads: corner) and count of tile k of t along an axis of n lines, `drawn` of them
-// drawn as samples (0: the tile draws nothing along it).
-inline uint2 tile_span(uint n, uint drawn, uint t, uint k) {
-    uint a = k * n / t, b = (k + 1u) * n / t;
-#if PL_QUADS
-    uint e = min(b, n - 1u);   // corners a .. e
-    return (uint2)(a, e > a ? e - a + 1u : 0u);
-#else
-    uint e = min(b, drawn);
-    return (uint2)(a, e > a ? e - a : 0u);
-#endif
-}
-
-// Work-items a sub-grid of nu x nv samples (quads: corners) takes (patch_runs, quad_runs).
-inline uint grid_units(uint split, uint nu, uint nv) {
-#if PL_QUADS
-    if (nu < 2u || nv < 2u) return 0u;
-    QuadRuns q = quad_runs(split, nu, nv);
-    return q.blocks * q.runs;
-#else
-    if (nu == 0u || nv == 0u) return 0u;
-    Runs r = patch_runs(split, nu, nv);
-    return r.na * r.runs;
-#endif
-}
-
-// A listed patch's tiles: tu x tv of them, `mask` those drawn, each given `chunks` chunks (enough
-// for its largest tile).
-typedef struct {
-    uint nu, nu_drawn, nv, nv_drawn, tu, tv, chunks;
-    ulong mask;
-} Tiling;
-
-inline Tiling patch_tiling(GridAxis gu, GridAxis gv, uint split, uint tiled, ulong mask) {
-    Tiling t;
-    t.nu = gu.n; t.nu_drawn = gu.n - gu.wrap; t.nv = gv.n; t.nv_drawn = gv.n - gv.wrap;
-    t.tu = tiled ? tiles_along(gu.n) : 1u;
-    t.tv = tiled ? tiles_along(gv.n) : 1u;
-    t.mask = tiled ? mask : 1ul;
-    uint mu = 0u, mv = 0u;
-    for (uint k = 0u; k < t.tu; ++k) mu = max(mu, tile_span(t.nu, t.nu_drawn, t.tu, k).y);
-    for (uint k = 0u; k < t.tv; ++k) mv = max(mv, tile_span(t.nv, t.nv_drawn, t.tv, k).y);
-    t.chunks = (grid_units(split, mu, mv) + POINTS_LOCAL - 1u) / POINTS_LOCAL;
-    return t;
-}
-
-// Chunk k of a listed patch: its tile's first sample (corner) along u and v, counts, and the chunk
-// within the tile.
-typedef struct { uint iu0, iv0, nu, nv, chunk; } TileChunk;
-
-inline TileChunk tile_chunk(Tiling t, uint k) {
-    uint ord = k / t.chunks;
-    ulong m = t.mask;
-    for (uint s = 0u; s < ord; ++s) m &= m - 1ul;   // the ord-th tile drawn
-    uint bit = 63u - (uint)clz(m & (~m + 1ul));
-    uint2 su = tile_span(t.nu, t.nu_drawn, t.tu, bit % t.tu), sv = tile_span(t.nv, t.nv_drawn, t.tv, bit / t.tu);
-    TileChunk c;
-    c.iu0 = su.x; c.nu = su.y; c.iv0 = sv.x; c.nv = sv.y; c.chunk = k - ord * t.chunks;
-    return c;
-}
-
-inline Tiling listed_tiling(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
-                            uint measure, uint max_side, uint tiled, ulong mask) {
+inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
+                         uint measure, uint max_side) {
     GridAxis gu, gv;
     patch_axes(rp, I, flags, factor, measure, max_side, &gu, &gv);
-    return patch_tiling(gu, gv, split, tiled, mask);
+#if PL_QUADS
+    QuadRuns q = quad_runs(split, gu.n, gv.n);
+    return (q.blocks * q.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
+#else
+    Runs r = patch_runs(split, gu.n - gu.wrap, gv.n - gv.wrap);
+    return (r.na * r.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
+#endif
 }
 
 // One work-item per patch: one 64-bit atomic gives the patch both its place in the schedule and
 // its first chunk, so first chunks increase with the place (points_direct searches them).
 // order[place] = first chunk << 32 | patch index. `tier`: only the patches of that hybrid tier
-// are listed (ALL_TIERS: every patch). `tiled`: the list comes from occlusion culling, masks[i]
-// the tiles of patch i to draw.
+// are listed (ALL_TIERS: every patch).
 #define ALL_TIERS 0xFFFFFFFFu
 __kernel void points_schedule(__global const RenderPatch* patches, __global const uint* count,
                               uint count_at, uint capacity, __global const float* inst_f,
                               __global const uint* inst_u, float factor,
-                              uint measure, uint max_side, uint tier, uint tiled,
-                              __global const ulong* masks, __global ulong* order, __global ulong* counters)
+                              uint measure, uint max_side, uint tier, __global ulong* order,
+                              __global ulong* counters)
 {
     uint n_patches = min(count[count_at], capacity);
     for (uint pid = get_global_id(0); pid < n_patches; pid += get_global_size(0)) {
         RenderPatch rp = patches[pid];
         if (tier != ALL_TIERS && ((rp.flags >> TIER_SHIFT) & 3u) != tier) continue;
         __global const uint* U = inst_u + rp.inst * INST_U;
-        Tiling t = listed_tiling(rp, inst_f + rp.inst * INST_F, U[INST_FLAGS], pl_split(U[INST_FUNC]), factor,
-                                 measure, max_side, tiled, tiled ? masks[pid] : 1ul);
-        ulong k = (ulong)popcount(t.mask) * t.chunks;
+        ulong k = patch_chunks(rp, inst_f + rp.inst * INST_F, U[INST_FLAGS], pl_split(U[INST_FUNC]), factor,
+                               measure, max_side);
         ulong old = atom_add(&counters[SCHED_AT], (1ul << CHUNK_BITS) | k);
         order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
     }
@@ -715,7 +647,6 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                    __global const float* cam, __global const ulong* view_masks,
                    __global const float* light,
                    float factor, uint measure, float widen, uint max_side, uint color_by,
-                   uint tiled, __global const ulong* masks,   // as points_schedule's
                    __global ulong* color_buf, __global ulong* aux_buf,
                    __global ulong* counters   // samples, atomics, NaN samples, capped patches, schedule
 #ifdef PL_RECORD
@@ -754,20 +685,13 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
             ulong seen = view_masks[pid];
 #endif
             if (c == first && get_local_id(0) == 0 && g.capped) n_capped++;
-            Tiling tiling = listed_tiling(rp, I, inst_u[inst * INST_U + INST_FLAGS], pl_split(func), factor, measure,
-                                          max_side, tiled, tiled ? masks[pid] : 1ul);
 #if PL_QUADS
+            QuadRuns qr = quad_runs(pl_split(func), g.nu_grid, g.nv_grid);
             for (; c < min(next, c_end); ++c) {
-                TileChunk tc = tile_chunk(tiling, c - first);
-                if (grid_units(pl_split(func), tc.nu, tc.nv) == 0u) continue;
-                QuadRuns qr = quad_runs(pl_split(func), tc.nu, tc.nv);
-                uint unit = tc.chunk * POINTS_LOCAL + get_local_id(0);   // the tile's block and run
+                uint unit = (c - first) * POINTS_LOCAL + get_local_id(0);   // the patch's block and run
                 if (unit >= qr.blocks * qr.runs) continue;
                 uint a0 = unit % qr.blocks * PL_QUAD_LINES, lines = min(PL_QUAD_LINES, qr.na - 1u - a0) + 1u;
                 uint b0 = unit / qr.blocks * qr.len, b1 = min(b0 + qr.len, qr.nb - 1u);
-                // from the tile's corners to the patch's
-                uint oa = qr.split == PL_SPLIT_V ? tc.iv0 : tc.iu0, ob = qr.split == PL_SPLIT_V ? tc.iu0 : tc.iv0;
-                a0 += oa; b0 += ob; b1 += ob;
 #if PL_RUN > 1
                 float a_line[PL_QUAD_LINES + 1u], C[PL_QUAD_LINES + 1u][PL_SPLIT_FLOATS];
                 for (uint k = 0u; k < lines; ++k) {
@@ -827,18 +751,13 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                 }   // the views
             }
 #else
+            Runs runs = patch_runs(pl_split(func), g.nu, g.nv);
             for (; c < min(next, c_end); ++c) {
-                TileChunk tc = tile_chunk(tiling, c - first);
-                if (grid_units(pl_split(func), tc.nu, tc.nv) == 0u) continue;
-                Runs runs = patch_runs(pl_split(func), tc.nu, tc.nv);
-                uint unit = tc.chunk * POINTS_LOCAL + get_local_id(0);   // the tile's run
-                if (unit >= runs.na * runs.runs) continue;   // the tile's last chunk is partly empty
+                uint unit = (c - first) * POINTS_LOCAL + get_local_id(0);   // the patch's run
+                if (unit >= runs.na * runs.runs) continue;   // the patch's last chunk is partly empty
                 uint ia = unit % runs.na, ib0 = unit / runs.na * runs.len;
-                // from the tile's samples to the patch's
-                uint oa = runs.split == PL_SPLIT_V ? tc.iv0 : tc.iu0, ob = runs.split == PL_SPLIT_V ? tc.iu0 : tc.iv0;
 #if PL_RUN > 1
-                uint ib1 = min(ib0 + runs.len, runs.nb) + ob;
-                ia += oa; ib0 += ob;
+                uint ib1 = min(ib0 + runs.len, runs.nb);
                 float a_line = line_at(g, runs.split, g.nu, g.nv, ia), C[PL_SPLIT_FLOATS];
                 if (runs.split) pl_surface_axis(func, a_line, P, C);
 #ifdef PL_VECTOR   // CPUs: the run's samples evaluated PL_VW at a time (surface_lanes)
@@ -846,7 +765,6 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
 #endif
                 for (uint ib = ib0; ib < ib1; ++ib) {
 #else   // GPUs: one sample, no private array and no loop (with them the H200's frames were 5-15 % slower)
-                ia += oa; ib0 += ob;
                 const float* C = 0;
                 {
                     uint ib = ib0;

@@ -1,10 +1,10 @@
-"""Two-phase occlusion culling of render patches for the direct point renderer, tile by tile
+"""Two-phase occlusion culling of render patches for the direct point renderer
 (kernels/points/occlusion.cl; numpy twin: paramlod.renderers.occlusion_reference; docs/points.md).
 
-Per frame: every tile of a render patch's sampling grid (up to 8 x 8 a patch) gets a conservative
-screen box and nearest depth, is tested against the depth pyramid of the previous frame's keys and
-is drawn (phase 1) or deferred; a pyramid of this frame's keys after phase 1 then re-tests the
-deferred tiles, and the ones not behind it are drawn too (phase 2). Keys only get nearer during a frame, so phase 2 never culls a patch that could
+Per frame: every render patch gets a conservative screen box and nearest depth, is tested against
+the depth pyramid of the previous frame's keys and is drawn (phase 1) or deferred; a pyramid of
+this frame's keys after phase 1 then re-tests the deferred patches, and the ones not behind it are
+drawn too (phase 2). Keys only get nearer during a frame, so phase 2 never culls a patch that could
 change a key, and a wrong guess in phase 1 (camera motion, animation, a first frame) costs only
 time. That pyramid is the next frame's guess.
 """
@@ -17,22 +17,10 @@ from paramlod.core.layouts import RENDER_PATCH
 from paramlod.device.context import cl_device
 from paramlod.device.programs import launch
 
-NODES = 3       # positions per side of a tile's bound (occlusion.cl OCC_NODES)
-TILE, TILES = 8, 8   # grid lines a tile side, about; tiles a side at most (points.cl OCC_TILE, PL_OCC_TILES)
-MAX_TILES_DEFINE = "PL_OCC_TILES"
-
-
-def max_tiles(is_gpu: bool) -> int:
-    """Tiles a side at most on a device (points.cl PL_OCC_TILES): 8 on GPUs; 4 on CPUs, where a
-    tile's bound costs a work-item 9 positions in turn (2-core EPYC, seashells at 960 x 540 with
-    culling on every frame: 8 a side took 1.16-1.24x the frame without culling, 4 0.88-1.02x,
-    2 0.73-0.94x with less culled, 1 1.02-1.07x; docs/points.md)."""
-    import os
-    return int(os.environ.get("PL_OCC_TILES_X", TILES if is_gpu else 4))
+GRID = 5        # positions per side of a patch's bound (occlusion.cl OCC_GRID)
 BOUND_FLOATS = 8
-# occlusion.cl counts[0..4]: patches listed in each phase's list, tiles deferred, tiles drawn late
-COUNTS = ("early", "deferred", "late", "tiles_deferred", "tiles_late")
-LOCAL = 64      # also the phase kernels' work-group: one work-item a tile (OCC_LOCAL)
+COUNTS = ("early", "deferred", "late")   # occlusion.cl counts[0..2]
+LOCAL = 64
 
 
 def pyramid_levels(width: int, height: int) -> list[tuple[int, int]]:
@@ -90,20 +78,18 @@ def _round(n: int) -> int:
 
 
 class OcclusionCuller:
-    """The per-renderer state of the two phases: the phase lists (patches with masks of their
-    tiles) and the pyramids (the previous frame's and this frame's)."""
+    """The per-renderer state of the two phases: the patches' bounds, the phase lists and the
+    pyramids (the previous frame's and this frame's)."""
 
     def __init__(self, program):
         dev = cl_device()
         self.program = program
         self.first_k = cl.Kernel(program, "occlusion_first")
         self.second_k = cl.Kernel(program, "occlusion_second")
-        self.bounds_k = cl.Kernel(program, "occlusion_bounds")
         self.counts_buf = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 4 * len(COUNTS))
         self._counts = np.zeros(len(COUNTS), np.uint32)
         self.capacity = 0
-        self.early = self.late = self.deferred = None
-        self.early_masks = self.late_masks = self.deferred_masks = None
+        self.bounds = self.early = self.late = self.deferred = None
         self.previous = self.current = None   # DepthPyramid: last frame's keys after its phase 1, this frame's
         self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
         self.events = []
@@ -113,45 +99,40 @@ class OcclusionCuller:
         ctx = cl_device().context
         if capacity > self.capacity:
             rw = cl.mem_flags.READ_WRITE
+            self.bounds = cl.Buffer(ctx, rw, 4 * BOUND_FLOATS * capacity)
             self.early = cl.Buffer(ctx, rw, RENDER_PATCH.dtype.itemsize * capacity)
             self.late = cl.Buffer(ctx, rw, RENDER_PATCH.dtype.itemsize * capacity)
             self.deferred = cl.Buffer(ctx, rw, 4 * capacity)
-            self.early_masks, self.late_masks, self.deferred_masks = (cl.Buffer(ctx, rw, 8 * capacity)
-                                                                      for _ in range(3))
             self.capacity = capacity
         if self.current is None or self.current.size != tuple(size):
             self.current = DepthPyramid(self.program, *size)
             self.previous = DepthPyramid(self.program, *size)   # invalid until built: phase 1 draws all
 
     def enqueue_first(self, patches_buf, count_buf, count_at: int, capacity: int, inst, cam_buf,
-                      sampling: tuple, size):
-        """Bound and test the tiles of the ``count_buf[count_at]`` render patches (at most
-        ``capacity``), sampled as ``sampling`` (factor, measure, widen, max_side: the point
-        renderer's arguments) says; ``self.early`` / ``self.early_masks`` / ``counts_buf[0]`` then
-        list the patches with tiles to draw now."""
+                      widen: float, size):
+        """Bound and test the ``count_buf[count_at]`` render patches (at most ``capacity``);
+        ``self.early`` / ``counts_buf[0]`` then list the ones to draw now."""
         capacity = max(int(capacity), 1)
         self._ensure(capacity, size)
         q = cl_device().queue
         cl.enqueue_fill_buffer(q, self.counts_buf, np.uint32(0), 0, 4 * len(COUNTS))
         prev = self.previous
         self.guessed = prev.valid
-        self.sampling = sampling
         self.first_k.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), *inst, cam_buf,
-                              *sampling, prev.buf, np.uint32(len(prev.levels) if prev.valid else 0),
-                              self.early, self.early_masks, self.deferred, self.deferred_masks, self.counts_buf)
-        items = min(capacity, self.max_groups) * LOCAL   # a work-group a patch
+                              np.float32(widen), prev.buf, np.uint32(len(prev.levels) if prev.valid else 0),
+                              self.bounds, self.early, self.deferred, self.counts_buf)
+        items = min(-(-capacity // LOCAL), self.max_groups) * LOCAL
         self.events = [launch(q, self.first_k, (items,), (LOCAL,))]
 
-    def enqueue_second(self, patches_buf, inst, cam_buf, keys, capacity: int):
-        """Build this frame's pyramid from ``keys`` and re-test the deferred tiles;
-        ``self.late`` / ``self.late_masks`` / ``counts_buf[2]`` then list the patches with tiles
-        to draw."""
+    def enqueue_second(self, patches_buf, cam_buf, keys, capacity: int):
+        """Build this frame's pyramid from ``keys`` and re-test the deferred patches;
+        ``self.late`` / ``counts_buf[2]`` then list the ones to draw."""
         q = cl_device().queue
         self.events += self.current.enqueue_build(keys)
         cur = self.current
-        self.second_k.set_args(patches_buf, *inst, cam_buf, *self.sampling, cur.buf, np.uint32(len(cur.levels)),
-                               self.deferred, self.deferred_masks, self.late, self.late_masks, self.counts_buf)
-        items = min(max(int(capacity), 1), self.max_groups) * LOCAL
+        self.second_k.set_args(patches_buf, cam_buf, cur.buf, np.uint32(len(cur.levels)), self.bounds,
+                               self.deferred, self.late, self.counts_buf)
+        items = min(-(-max(int(capacity), 1) // LOCAL), self.max_groups) * LOCAL
         self.events.append(launch(q, self.second_k, (items,), (LOCAL,)))
 
     def swap(self):
@@ -164,29 +145,12 @@ class OcclusionCuller:
         cl.enqueue_copy(cl_device().queue, self._counts, self.counts_buf, is_blocking=False)
 
     def counts(self) -> dict:
-        """COUNTS of the last frame (after its wait): patches listed early, deferred and late;
-        tiles deferred and drawn late (occluded = tiles_deferred - tiles_late)."""
+        """{"early", "deferred", "late"} patches of the last frame (after its wait); occluded =
+        deferred - late."""
         return {k: int(v) for k, v in zip(COUNTS, self._counts)}
 
-    def read_list(self, phase: str, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """The last frame's list of ``phase`` ("early", "late": render patches; "deferred": their
-        indices in the render list) and its tile masks, ``n`` entries (tests)."""
-        buf, masks = {"early": (self.early, self.early_masks), "late": (self.late, self.late_masks),
-                      "deferred": (self.deferred, self.deferred_masks)}[phase]
-        items = np.empty(n, np.uint32 if phase == "deferred" else RENDER_PATCH.dtype)
-        out = np.empty(n, np.uint64)
-        if n:
-            cl.enqueue_copy(cl_device().queue, items, buf)
-            cl.enqueue_copy(cl_device().queue, out, masks)
-        return items, out
-
-    def tile_bounds(self, patches_buf, n: int, inst, cam_buf) -> np.ndarray:
-        """float32 (n, TILES², 8) bounds of every tile of the first ``n`` patches of ``patches_buf``
-        as the last frame sampled them (slots past a patch's tiles: zeros; tests)."""
-        out = np.zeros((n, LOCAL, BOUND_FLOATS), np.float32)
-        if n:
-            buf = cl.Buffer(cl_device().context, cl.mem_flags.WRITE_ONLY, out.nbytes)
-            self.bounds_k.set_args(patches_buf, np.uint32(n), *inst, cam_buf, *self.sampling, buf)
-            launch(cl_device().queue, self.bounds_k, (_round(n * LOCAL),), (LOCAL,))
-            cl.enqueue_copy(cl_device().queue, out, buf)
+    def read_bounds(self, n: int) -> np.ndarray:
+        """float32 (n, 8) bounds of the last frame's first ``n`` render patches (tests)."""
+        out = np.empty((n, BOUND_FLOATS), np.float32)
+        cl.enqueue_copy(cl_device().queue, out, self.bounds)
         return out

@@ -12,7 +12,7 @@ from paramlod.device.context import cl_device
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import POINT_TIERS, tier_divisors
-from paramlod.renderers.occlusion import MAX_TILES_DEFINE, OcclusionCuller, max_tiles
+from paramlod.renderers.occlusion import OcclusionCuller
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, patch_wraps, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
@@ -58,13 +58,6 @@ class AutoOcclusion:
 ALL_TIERS = np.uint32(0xFFFFFFFF)   # points.cl: every patch, whatever its hybrid tier
 
 
-def sampling_args(settings: PointSettings, scale: int = 1) -> tuple:
-    """The sampling arguments of points.cl's kernels (and occlusion.cl's): factor, measure,
-    widen, max_side."""
-    return (settings.factor(scale), settings.measure(boundary=True),   # watertight on patch edges
-            np.float32(settings.widen), np.uint32(settings.max_side))
-
-
 class _Launch:
     """The schedule and sample kernels of one list drawn in a frame, with the arguments bound."""
 
@@ -86,8 +79,6 @@ class DirectPointRenderer:
         else:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
             defines[POLY_TRIG] = 1
         defines["PL_RUN"] = sample_run(cl_device().is_gpu)   # points.cl patch_runs
-        self.occlusion_tiles = max_tiles(cl_device().is_gpu)
-        defines[MAX_TILES_DEFINE] = self.occlusion_tiles
         self._functions, self._defines = functions, defines
         # the program of one-view frames with pixel coverage, which occlusion.cl shares (the
         # function code is compiled once; OcclusionCuller takes its kernels whatever the frame's
@@ -125,7 +116,7 @@ class DirectPointRenderer:
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
                 light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None,
-                phase: int = 0, tier: int | None = None, scale: int = 1, tile_masks=None):
+                phase: int = 0, tier: int | None = None, scale: int = 1):
         """Enqueue the render of the ``count_buf[count_at]`` (read on the device, at most
         ``capacity``) patches of ``patches_buf`` without waiting; ``counts()`` reads the counters.
         ``phase`` > 0: a later list of the same frame (occlusion culling's phase 2, a finer hybrid
@@ -135,8 +126,7 @@ class DirectPointRenderer:
         ``n_views``: camera records in ``cam_buf``, each sample is written into layer v of
         ``keys`` for every view v that sees its patch (``view_masks``: a uint64 per patch, bit v
         for view v, as LodStage.render_views; needed with several views) and whose frustum holds
-        it (``keys.layers`` must be ``n_views``). ``tile_masks``: a uint64 per listed patch, the
-        tiles of its grid to draw (occlusion culling's lists; None: every patch whole)."""
+        it (``keys.layers`` must be ``n_views``)."""
         settings.validate()
         if settings.coverage == "quad" and self.record:
             raise ValueError("points: the record hook records one pixel a sample, not quad coverage")
@@ -155,11 +145,11 @@ class DirectPointRenderer:
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
         else:   # only the schedule's counter
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * len(COUNTERS), 8)
-        factor, measure, widen, max_side = sampling_args(settings, scale)
-        tiled = (np.uint32(0), self.counters) if tile_masks is None else (np.uint32(1), tile_masks)
+        sampling = (settings.factor(scale), settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, self._order,
-                *inst, materials_buf, cam_buf, view_masks, light_buf, factor, measure, widen, max_side,
-                np.uint32(COLOR_BY.index(settings.color_by)), *tiled, keys.color, keys.aux, self.counters, *record_args)
+                *inst, materials_buf, cam_buf, view_masks, light_buf, *sampling, np.float32(settings.widen),
+                np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)), keys.color, keys.aux,
+                self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time
         kind = (settings.coverage, n_views > 1)
@@ -169,7 +159,7 @@ class DirectPointRenderer:
         bound = (count_buf, count_at, capacity, tier, args)
         if bound != k.bound:
             k.schedule.set_args(patches_buf, count_buf, np.uint32(count_at), np.uint32(capacity), inst[0], inst[1],
-                                factor, measure, max_side, ALL_TIERS if tier is None else np.uint32(tier), *tiled,
+                                *sampling, np.uint32(settings.max_side), ALL_TIERS if tier is None else np.uint32(tier),
                                 self._order, self.counters)
             k.kernel.set_args(*args)
             k.bound = bound
@@ -247,10 +237,10 @@ class DirectPoints:
             return
         occ, cap = self.occlusion, lod.render.capacity
         occ.enqueue_first(lod.render.buf, lod.counters, LOD_RENDER_TOTAL, cap, d["inst"], d["cam"],
-                          sampling_args(settings.points), (target.width, target.height))
-        pts.enqueue(occ.early, occ.counts_buf, 0, cap, *draw, tile_masks=occ.early_masks)
-        occ.enqueue_second(lod.render.buf, d["inst"], d["cam"], target, cap)
-        pts.enqueue(occ.late, occ.counts_buf, 2, cap, *draw, phase=1, tile_masks=occ.late_masks)
+                          settings.points.widen, (target.width, target.height))
+        pts.enqueue(occ.early, occ.counts_buf, 0, cap, *draw)
+        occ.enqueue_second(lod.render.buf, d["cam"], target, cap)
+        pts.enqueue(occ.late, occ.counts_buf, 2, cap, *draw, phase=1)
         occ.swap()
 
     def _enqueue_tier(self, target, settings, tier: int):
@@ -284,8 +274,7 @@ class DirectPoints:
         if self.culled:   # render: from the first bound to the last sample
             c = self.occlusion.counts()
             out["occlusion"] = {"drawn_first": c["early"], "deferred": c["deferred"], "drawn_second": c["late"],
-                                "tiles_deferred": c["tiles_deferred"],
-                                "occluded": c["tiles_deferred"] - c["tiles_late"]}
+                                "occluded": c["deferred"] - c["late"]}
             first, last = self.occlusion.events[0], self.points.events[-1]
             out["ms"]["render"] = (last.profile.end - first.profile.start) * 1e-6
         if self.auto_frame:

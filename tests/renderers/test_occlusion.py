@@ -1,6 +1,6 @@
-"""Two-phase occlusion culling of the direct points, tile by tile (kernels/points/occlusion.cl,
-paramlod.renderers.occlusion): the depth pyramid, the tiles' bounds and the phase decisions against
-the numpy twin (paramlod.renderers.occlusion_reference), bounds that hold every sample of a tile, and frames with
+"""Two-phase occlusion culling of the direct points (kernels/points/occlusion.cl,
+paramlod.renderers.occlusion): the depth pyramid and the phase decisions against the numpy twin
+(paramlod.renderers.occlusion_reference), bounds that hold every sample of a patch, and frames with
 culling on that equal those with it off, bit for bit, for a static camera, a moving one, a jump
 (what phase 1 wrongly rejects, phase 2 must draw) and an animation."""
 import numpy as np
@@ -14,9 +14,8 @@ from paramlod.device.context import cl_device
 from paramlod.lod.reference import sampled_range, world_positions
 from paramlod.pipeline.driver import scene_state
 from paramlod.renderers.occlusion import DepthPyramid, pyramid_levels
-from paramlod.renderers.occlusion_reference import (depth_pyramid, grid_at, occluded, tile_bounds, tile_grids,
-                                                     tile_spans)
-from paramlod.renderers.points import AUTO_MIN_SAVED, AUTO_PROBE, AutoOcclusion, DirectPointRenderer, sampling_args
+from paramlod.renderers.occlusion_reference import depth_pyramid, occluded, patch_bounds
+from paramlod.renderers.points import AUTO_MIN_SAVED, AUTO_PROBE, AutoOcclusion, DirectPointRenderer
 from paramlod.renderers.targets import KeyBuffer
 from paramlod.scene.framing import framing_camera
 
@@ -89,21 +88,7 @@ def test_pyramid_equals_the_twin():
 
 
 # --- the phases against the twin ---------------------------------------------------------------
-def _tile_bounds(scene, state, cam, rs, n):
-    """The kernel's bounds of every tile of the frame's n render patches, and the render list."""
-    d = state.dev
-    return state.occlusion.tile_bounds(state.lod.render.buf, n, d["inst"], d["cam"]), state.lod.read_render_list(n)
-
-
-def _masks(bits: np.ndarray) -> np.ndarray:
-    """uint64 masks from bool (n, 64) tile decisions."""
-    return (bits.astype(np.uint64) << np.arange(64, dtype=np.uint64)).sum(axis=1, dtype=np.uint64)
-
-
-@pytest.mark.parametrize("gpu_tiles", [False, True])
-def test_bounds_and_phase_decisions_equal_the_twin(gpu_tiles, monkeypatch):
-    if gpu_tiles:   # up to 8 x 8 tiles a patch, as GPUs cut them
-        monkeypatch.setattr("paramlod.renderers.points.max_tiles", lambda is_gpu: 8)
+def test_bounds_and_phase_decisions_equal_the_twin():
     scene, cam = wall_scene(), camera()
     rs = settings(True)
     first = pl.render(scene, cam, "points", rs)
@@ -111,49 +96,33 @@ def test_bounds_and_phase_decisions_equal_the_twin(gpu_tiles, monkeypatch):
     frame = pl.render(scene, cam, "points", rs)   # static: phase 1 tests against the first frame's keys
     state = points_state(scene)
     n = frame.stats["render_patches"]
-    bounds, rl = _tile_bounds(scene, state, cam, rs, n)
+    rl = state.lod.read_render_list(n)
+    bounds = state.occlusion.read_bounds(n)
     occ = frame.stats["occlusion"]
     assert first.stats["occlusion"]["deferred"] == 0   # no previous frame: all drawn in phase 1
 
-    # the tiles, exactly, and their bounds: the twin's, to float rounding
-    most = state.points.occlusion_tiles
-    grids = tile_grids(rl, scene.instance_buffers()[0], rs.points, most)
-    tiles = grids["u"]["tiles"] * grids["v"]["tiles"]
-    used = np.arange(64)[None, :] < tiles[:, None]
-    assert tiles.max() > 1, "the tori's patches should have several tiles"
-    assert (bounds[~used] == 0).all() and (bounds[used][:, 2] > 0).all()
-    twin = tile_bounds(rl, scene.instance_buffers(), scene.functions(), camera_record(cam), rs.points, most)
-    np.testing.assert_allclose(bounds[used][:, :4], twin[used][:, :4], rtol=1e-4, atol=0.05)
-    np.testing.assert_allclose(bounds[used][:, 4], twin[used][:, 4], rtol=1e-4)
+    # bounds: the twin's, to float rounding
+    twin = patch_bounds(rl, scene.instance_buffers(), scene.functions(), camera_record(cam), rs.points.widen)
+    np.testing.assert_allclose(bounds[:, :4], twin[:, :4], rtol=1e-4, atol=0.05)
+    np.testing.assert_allclose(bounds[:, 4], twin[:, 4], rtol=1e-4)
 
-    # phase 1: exactly the tiles the twin finds behind the previous frame's pyramid
-    flat = bounds.reshape(-1, 8)
-    hidden = occluded(flat, depth_pyramid(keys_first), *cam.size).reshape(n, 64) & used
-    early, early_masks = state.occlusion.read_list("early", occ["drawn_first"])
-    deferred, deferred_masks = state.occlusion.read_list("deferred", occ["deferred"])
-    want_drawn, want_later = _masks(used & ~hidden), _masks(hidden)
-    got_later = dict(zip(deferred.tolist(), deferred_masks.tolist()))
-    assert got_later == {int(p): int(want_later[p]) for p in np.flatnonzero(want_later)}
-    place = {(tuple(r["range"]), int(r["inst"])): k for k, r in enumerate(rl)}
-    got_drawn = {place[(tuple(r["range"]), int(r["inst"]))]: int(m) for r, m in zip(early, early_masks)}
-    assert got_drawn == {int(p): int(want_drawn[p]) for p in np.flatnonzero(want_drawn)}
-    assert occ["tiles_deferred"] == int(hidden.sum())
-    # phase 2: the deferred tiles not behind this frame's pyramid after phase 1
+    # phase 1: exactly the patches the twin finds behind the previous frame's pyramid
+    deferred = np.empty(occ["deferred"], np.uint32)
+    if len(deferred):
+        cl.enqueue_copy(cl_device().queue, deferred, state.occlusion.deferred)
+    want = np.flatnonzero(occluded(bounds, depth_pyramid(keys_first), *cam.size))
+    assert sorted(deferred.tolist()) == want.tolist()
+    assert occ["drawn_first"] + occ["deferred"] == n
+    # phase 2: the deferred ones not behind this frame's pyramid after phase 1
     current = state.occlusion.current.read()
-    late_bits = ~occluded(flat, current, *cam.size).reshape(n, 64) & hidden
-    late, late_masks = state.occlusion.read_list("late", occ["drawn_second"])
-    got_late = {place[(tuple(r["range"]), int(r["inst"]))]: int(m) for r, m in zip(late, late_masks)}
-    want_late = _masks(late_bits)
-    assert got_late == {int(p): int(want_late[p]) for p in np.flatnonzero(want_late)}
-    assert occ["occluded"] == int((hidden & ~late_bits).sum())
-    assert occ["occluded"] > used.sum() // 5, "the wall hides most tori: phase 2 should cull many tiles"
+    assert occ["drawn_second"] == int((~occluded(bounds[deferred], current, *cam.size)).sum())
+    assert occ["occluded"] > n // 5, "the wall hides most tori: phase 2 should cull many patches"
 
 
 @pytest.mark.parametrize("fname", ["sphere", "torus", "seashell3", "yarn", "sh_glyph", "giant_worm"])
 def test_bounds_hold_every_sample(fname):
-    """Every position of a dense grid over a tile (from the line before its first to the line
-    after its last: its samples, its quads' corners, its samples' pixel-centre cells) projects
-    inside the tile's screen box and no nearer than its near depth."""
+    """Every position of a dense grid over a render patch's sampled range projects inside its
+    screen box and no nearer than its near depth."""
     scene = pl.Scene()
     scene.add(fname, transform=pl.rotate(35, (1, 0.4, 0.2)))
     cam = framing_camera(scene, (0.3, 0.5, 1.0), (0, 1, 0), 40.0, (96, 80), margin=0.7)   # partly off-screen
@@ -161,56 +130,31 @@ def test_bounds_hold_every_sample(fname):
     frame = pl.render(scene, cam, "points", rs)
     state = points_state(scene)
     n = frame.stats["render_patches"]
-    bounds, rl = _tile_bounds(scene, state, cam, rs, n)
-    bounds = bounds.astype(np.float64)
-    grids = tile_grids(rl, scene.instance_buffers()[0], rs.points, state.points.occlusion_tiles)
-    tiles = grids["u"]["tiles"] * grids["v"]["tiles"]
-    assert tiles.max() > 1
+    rl = state.lod.read_render_list(n)
+    bounds = state.occlusion.read_bounds(n).astype(np.float64)
+    inst_f = scene.instance_buffers()[0]
+    u0, u1, v0, v1 = sampled_range(rl, inst_f, rs.points.widen)
+    t = np.linspace(0, 1, 17, dtype=np.float32)
+    u = np.broadcast_to(u0[:, None, None] + (u1 - u0)[:, None, None] * t[None, None, :], (n, 17, 17))
+    v = np.broadcast_to(v0[:, None, None] + (v1 - v0)[:, None, None] * t[None, :, None], (n, 17, 17))
+    world, bad = world_positions(scene.instance_buffers(), scene.functions(),
+                        np.broadcast_to(rl["inst"].astype(np.int64)[:, None, None], u.shape), u, v)
     rec = camera_record(cam).astype(np.float64)
     view, proj = rec[0:16].reshape(4, 4), rec[16:32].reshape(4, 4)
-    t = np.linspace(0, 1, 9, dtype=np.float32)
-    tested = fails = 0
-    for slot in range(int(tiles.max())):
-        p = np.flatnonzero(slot < tiles)
-        sub = {axis: {key: val[p] for key, val in grids[axis].items()} for axis in "uv"}
-        u0, u1 = tile_spans(sub["u"], slot % sub["u"]["tiles"])
-        v0, v1 = tile_spans(sub["v"], slot // sub["u"]["tiles"])
-        m = len(p)
-        u = np.broadcast_to(u0[:, None, None] + (u1 - u0)[:, None, None] * t[None, None, :], (m, 9, 9))
-        v = np.broadcast_to(v0[:, None, None] + (v1 - v0)[:, None, None] * t[None, :, None], (m, 9, 9))
-        world, bad = world_positions(scene.instance_buffers(), scene.functions(),
-                                     np.broadcast_to(rl["inst"][p].astype(np.int64)[:, None, None], u.shape), u, v)
-        e = world.astype(np.float64) @ view[:3, :3].T + view[:3, 3]
-        c = e @ proj[:, :3].T + proj[:, 3]
-        x = (c[..., 0] / c[..., 3] * 0.5 + 0.5) * cam.size[0]
-        y = (0.5 - c[..., 1] / c[..., 3] * 0.5) * cam.size[1]
-        depth = -e[..., 2]
-        b = bounds[p, slot][:, None, None, :]
-        live = (bounds[p, slot, 4] > 0)[:, None, None]   # near 0: never culled, nothing to hold
-        slack = 1e-3
-        inside = (x >= b[..., 0] - slack) & (x <= b[..., 2] + slack) & (y >= b[..., 1] - slack) & (y <= b[..., 3] + slack)
-        nearer = depth >= b[..., 4] * (1 - 1e-6)
-        fails += int((live & ~bad & ~(inside & nearer)).sum())
-        tested += int(live.sum())
-    assert tested > tiles.sum() // 2
-    assert fails == 0, f"{fails} positions outside their tile's bound"
-
-
-def test_grid_lines_equal_the_samples():
-    """The twin's grid lines (tile spans are made of them) are the parameters the renderer samples:
-    a patch's first and last line are its sampled range, and the line before tile k's first one
-    and after its last one stay in it."""
-    scene, cam = wall_scene(), camera()
-    rs = settings(True)
-    frame = pl.render(scene, cam, "points", rs)
-    rl = points_state(scene).lod.read_render_list(frame.stats["render_patches"])
-    u0, u1, v0, v1 = sampled_range(rl, scene.instance_buffers()[0], rs.points.widen)
-    g = tile_grids(rl, scene.instance_buffers()[0], rs.points)
-    np.testing.assert_allclose(grid_at(g["u"], np.zeros(len(rl), np.int64)), u0, rtol=0, atol=0)
-    np.testing.assert_allclose(grid_at(g["u"], g["u"]["n"] - 1), u1, rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(grid_at(g["v"], g["v"]["n"] - 1), v1, rtol=1e-5, atol=1e-6)
-    lo, hi = tile_spans(g["v"], g["v"]["tiles"] - 1)
-    assert (lo >= v0).all() and (hi <= v1 * (1 + 1e-6) + 1e-6).all() and (lo < hi).all()
+    e = world.astype(np.float64) @ view[:3, :3].T + view[:3, 3]
+    c = e @ proj[:, :3].T + proj[:, 3]
+    x = (c[..., 0] / c[..., 3] * 0.5 + 0.5) * cam.size[0]
+    y = (0.5 - c[..., 1] / c[..., 3] * 0.5) * cam.size[1]
+    depth = -e[..., 2]
+    tested = bounds[:, 4] > 0   # near 0: never culled, nothing to hold
+    assert tested.sum() > n // 2
+    ok = ~bad
+    b = bounds[:, None, None, :]
+    slack = 1e-3
+    inside = (x >= b[..., 0] - slack) & (x <= b[..., 2] + slack) & (y >= b[..., 1] - slack) & (y <= b[..., 3] + slack)
+    nearer = depth >= b[..., 4] * (1 - 1e-6)
+    fails = tested[:, None, None] & ok & ~(inside & nearer)
+    assert not fails.any(), f"{int(fails.sum())} samples outside their patch's bound"
 
 
 # --- the same frames with culling on and off ---------------------------------------------------
@@ -252,28 +196,6 @@ def test_frames_equal_without_culling(case, ss):
         assert samples_on < samples_off
     else:   # a good guess: the hidden tori cost nothing
         assert samples_on < 0.8 * samples_off
-
-
-@pytest.mark.parametrize("gpu_shape", [False, True])
-@pytest.mark.parametrize("coverage", ["pixel", "centre", "quad"])
-def test_tiles_draw_the_same_frames_in_every_kernel_shape(coverage, gpu_shape, monkeypatch):
-    """Each coverage's tile-by-tile drawing (samples, pixel-centre cells, quads between lines of
-    neighbouring tiles), with runs down the grid lines (CPUs) and one sample a work-item (GPUs,
-    here compiled for PoCL), along the jumping camera path."""
-    if gpu_shape:
-        monkeypatch.setattr("paramlod.renderers.points.sample_run", lambda is_gpu: 1)
-    frames = {}
-    for occlusion in (True, False):
-        scene = wall_scene()
-        rs = settings(occlusion)
-        rs.points.coverage = coverage
-        frames[occlusion] = [pl.render(scene, cam, "points", rs).materialize() for cam in JUMP]
-    for k, (a, b) in enumerate(zip(frames[True], frames[False])):
-        for name in OUTPUTS:
-            assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), \
-                f"frame {k}: {name} differs with occlusion culling"
-    assert sum(f.stats["occlusion"]["occluded"] for f in frames[True]) > 0
-    assert sum(f.stats["samples"] for f in frames[True]) < sum(f.stats["samples"] for f in frames[False])
 
 
 def test_multi_view_frames_and_occlusion_off_draw_in_one_pass():
