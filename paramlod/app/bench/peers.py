@@ -604,7 +604,8 @@ def run_peers(args, out_dir, log=print) -> dict:
     specs = [scene_spec(s, size, args.peers_grid) for s in args.peers_scenes]
     renderers = [t for t, kind in present.items() if kind == "render"]
     refs, fields = {}, {}
-    if specs and ("paramlod" in tools or renderers):
+    rendering = bool(specs) and ("paramlod" in tools or bool(renderers))
+    if rendering:
         for spec in specs:
             fields[spec["name"]] = glyph_field(spec["order"], spec["grid"]) if spec["kind"] == "glyphs" else None
             refs[spec["name"]], result["references"][spec["name"]] = reference_silhouette(spec, fields[spec["name"]])
@@ -621,20 +622,23 @@ def run_peers(args, out_dir, log=print) -> dict:
             return None
         return got
 
-    rounds = args.peers_rounds if specs and ("paramlod" in tools or renderers) else 0
+    rounds = args.peers_rounds if rendering else 0
     result["rounds"] = rounds
     per_round = []   # each round's rows: the ratios of one round come from times taken minutes apart at most
+    failed_rows = set()   # paramlod's rows that failed, said once: not run again in a later round
     for k in range(rounds):
         mark = f" (round {k + 1} of {rounds})" if rounds > 1 else ""
         rows = []
         for spec in specs if "paramlod" in tools else ():
             for variant, t in ((v, t) for t in args.peers_thresholds for v in PARAMLOD_ROWS):
+                if (spec["name"], variant, t) in failed_rows:
+                    continue
                 try:
                     r = paramlod_render_row(spec, variant, frames, warmup, fields[spec["name"]], t)
                 except ParamlodError as exc:
-                    if k == 0:
-                        result["failed"].append({"tool": "paramlod", "scene": spec["name"], "variant": variant,
-                                                 "status": str(exc)})
+                    failed_rows.add((spec["name"], variant, t))
+                    result["failed"].append({"tool": "paramlod", "scene": spec["name"], "variant": variant,
+                                             "status": str(exc)})
                     continue
                 r["error"] = silhouette_error(r.pop("mask"), refs[spec["name"]])
                 r["scene"] = spec["name"]
