@@ -41,12 +41,21 @@ def test_bench_measures_points_with_centre_coverage(tmp_path):
 
 def test_bench_measures_tess_with_the_grid_and_chord_levels(tmp_path):
     assert main(["bench", "sphere", "--variants", "tess", "tess-grid", "tess-chord", "--size", "64x48", "--distances",
-                 "1", "--frames", "2", "--warmup", "1", "--out", str(tmp_path)]) == 0
+                 "1", "--frames", "2", "--warmup", "1", "--extras", "--out", str(tmp_path)]) == 0
     v = json.loads((tmp_path / "results.json").read_text())["scenarios"]["sphere"]["variants"]
     tess, grid, chord = (v[k][0] for k in ("tess", "tess-grid", "tess-chord"))
     assert tess["render_patches"] == grid["render_patches"] == chord["render_patches"]
     # a sphere of 48 px: chords within 0.25 px need far fewer triangles than 1-pixel segments
     assert 0 < chord["triangles"] * 4 < grid["triangles"]
+
+
+def test_bench_measures_what_tess_detail_levels_cost(tmp_path):
+    assert main(["bench", "sh12", "--variants", "tess", "tess-detail", "--size", "64x48", "--distances", "1",
+                 "--frames", "1", "--warmup", "0", "--extras", "--out", str(tmp_path)]) == 0
+    v = json.loads((tmp_path / "results.json").read_text())["scenarios"]["sh12"]["variants"]
+    plain, detail = v["tess"][0], v["tess-detail"][0]
+    # a glyph of 48 px: its thin lobes have detail finer than a pixel, measured again and split finer
+    assert detail["render_patches"] > plain["render_patches"] and detail["triangles"] > plain["triangles"]
 
 
 def test_bench_names_unknown_scenarios(tmp_path, capsys):

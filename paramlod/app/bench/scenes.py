@@ -24,6 +24,7 @@ VARIANT_SETTINGS = {
     "tess-grid": {("tess", "tessellator"): "grid"},                         # docs/tessellation.md, "The grid tessellator"
     "tess-chord": {("tess", "mode"): "chord", ("tess", "l_min"): 1.0},      # docs/tessellation.md, "Tessellation levels"
     "tess-segment": {("tess", "inner_measure"): "segment"},                 # docs/tessellation.md, "Tessellation levels"
+    "tess-detail": {("tess", "detail_levels"): True},                       # docs/hybrid.md, "Detail levels"
 }
 
 
