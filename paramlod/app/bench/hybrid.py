@@ -60,8 +60,8 @@ VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-pair": ("tess", "hyb
             "tess-4xSS+8xMS": ("tess", "4xSS+8xMS"),
             "points-hybrid": ("points", "hybrid"), "points-16xSS": ("points", "16xSS"),
             "points-noAA": ("points", "noAA"), "tess-noAA": ("tess", "noAA"),
-            # uniform 4xSS: on llvmpipe it came within 5-19 % of 4xSS+8xMS's FLIP at under half its
-            # time, where the hybrid did not (docs/hybrid.md); these rows measure that on any device
+            # uniform 4xSS: on llvmpipe and an H100 it came closer to 4xSS+8xMS's (16xSS's) FLIP at
+            # under half the time than the hybrid did (docs/hybrid.md); these rows measure that anywhere
             "tess-4xSS": ("tess", "4xSS"), "points-4xSS": ("points", "4xSS")}
 # variants drawn with TessSettings.hybrid_targets other than the default "tiers"
 TESS_TARGETS = {"tess-hybrid-pair": "pair", "tess-hybrid-finest": "finest"}
