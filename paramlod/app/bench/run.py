@@ -65,7 +65,8 @@ VARIANTS = {"points": ("points", None), "points-4xSS": ("points", "4xSS"), "poin
             "points-hybrid": ("points", "hybrid"), "tess-hybrid": ("tess", "hybrid"), "points-centre": ("points", None),
             "points-quad": ("points", None), "points-quad-fine": ("points", None),
             "tess-grid": ("tess", "noAA"), "tess-chord": ("tess", "noAA"),
-            "tess-segment": ("tess", "noAA"), "tess-detail": ("tess", "noAA")}   # their own settings: scenes.VARIANT_SETTINGS
+            "tess-segment": ("tess", "noAA"),
+            "tess-detail": ("tess", "noAA")}   # their own settings: scenes.VARIANT_SETTINGS
 DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8xMS"]
 NO_CULLING = "(no culling)"   # the label of rows measured with --culling off / both
 
