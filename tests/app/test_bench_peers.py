@@ -2,7 +2,6 @@
 the matched-error view, rows for peers that are missing or fail, the markdown, a real paramlod row,
 and (only where the peer is importable, e.g. after pip install 'paramlod[peers]') real peer rows."""
 import argparse
-import importlib
 import importlib.util
 import json
 import math
@@ -20,10 +19,11 @@ def _peer_or_skip(tool: str):
     """Skip unless ``tool`` imports: not installed, or installed but unable to load a system library
     it links (Open3D's wheel without libusb raises OSError, which importorskip lets through); the
     reason names what to install, as the bench's own row does."""
-    if importlib.util.find_spec(tool) is None:
-        pytest.skip(f"{tool} is not installed: {P.PEERS[tool][2]}")
+    module = P.PEERS[tool][0]   # as the bench looks for it
+    if importlib.util.find_spec(module) is None:
+        pytest.skip(f"{tool} is not installed: {P.missing_row(tool)['install']}")
     try:
-        importlib.import_module(tool)
+        importlib.import_module(module)
     except (ImportError, OSError) as exc:
         hint = P.SYSTEM_HINTS[tool]
         pytest.skip(f"{tool} is installed but does not load ({exc})" + (f"; {hint}" if hint else ""))
