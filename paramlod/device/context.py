@@ -10,6 +10,7 @@ import os
 import warnings
 from dataclasses import dataclass, field
 
+from paramlod.device import pocl_cpu
 from paramlod.errors import DeviceError
 
 REQUIRED_EXTENSION = "cl_khr_int64_extended_atomics"
@@ -108,6 +109,8 @@ def cl_device() -> CLDevice:
 
         selector = _cl_override or os.environ.get("PARAMLOD_CL_DEVICE") or None
         dev = choose_device(list_devices(), selector)
+        if pocl_cpu.needs_cpu_name(dev):
+            pocl_cpu.name_cpu(dev)
         ctx = cl.Context([dev])
         _cl = CLDevice(ctx, cl.CommandQueue(ctx, properties=cl.command_queue_properties.PROFILING_ENABLE), dev)
     return _cl
