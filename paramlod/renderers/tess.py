@@ -10,13 +10,14 @@ Anti-aliasing modes (``parse_aa``): ``noAA``; ``2xMS``/``4xMS``/``8xMS`` (aliase
 ``4xSS``/``9xSS``/``16xSS`` (2x2, 3x3, 4x4 supersampling; aliases ``ssaa2x2`` ...); and
 combinations such as ``4xSS+8xMS`` (32 depth samples per pixel). A multisample request above what
 the device supports is capped, with a warning and ``stats["warnings"]``. The LOD thresholds are
-divided by ``lod_divisor(mode)``: the supersampling factor per axis (``msaa_lod`` adds sqrt(MSAA)).
+divided by ``lod_divisor(mode)``: the supersampling factor per axis (``msaa_lod = True`` adds sqrt(MSAA)).
 
 Hybrid anti-aliasing (``aa = "hybrid"``, thesis section 5.5.7, docs/hybrid.md): the LOD stage sends
 each patch with sub-pixel detail or a silhouette to a finer tier (``render_tiers``); the render list is ordered by
 tier and each tier drawn into its own targets (``hybrid_tiers``: noAA, 8xMS, 4xSS+8xMS,
 multisampling capped to the device), coarse to fine, with the thresholds of its tier
-(``tier_divisors``: those of the tier's uniform mode, ``msaa_lod`` included). A finer tier's
+(``tier_divisors``: by default sqrt(8) and sqrt(32), the thesis's guideline that issue #21 names;
+those of the tiers' uniform modes, 1 and 2, with ``msaa_lod = False``). A finer tier's
 targets start from a per-sample copy of the last tier drawn (``GLTargets.carry``), so its patches
 are depth-tested per sample against the coarser ones, and the finest tier drawn is resolved; tiers
 without patches are skipped (a frame of tier-0 patches only is a noAA frame). One view at a
@@ -172,7 +173,7 @@ class TessSettings:
     spacing: str = "fractional_odd"
     aa: str = "noAA"
     overlap: float = 0.005
-    msaa_lod: bool = False   # divide the LOD threshold by sqrt(msaa) too (see AAMode.divisor)
+    msaa_lod: bool | None = None   # divide the LOD threshold by sqrt(msaa) too; None: for hybrid only (msaa_lod_for)
     views_per_pass: int = 1
     color_by: str = "material"
     hybrid_targets: str = "tiers"
@@ -180,6 +181,12 @@ class TessSettings:
     tessellator: str = "auto"
     chord_px: float = 0.25
     inner_measure: str = "extent"
+
+    def msaa_lod_for(self, aa: AAMode) -> bool:
+        """Whether the LOD thresholds of AA mode ``aa`` are divided by sqrt(multisamples) too:
+        ``msaa_lod`` where set; unset, for hybrid tiers (8xMS sqrt(8), 4xSS+8xMS sqrt(32), the
+        thesis's guideline for them) and not for the uniform modes (its non-hybrid figures)."""
+        return bool(aa.hybrid) if self.msaa_lod is None else bool(self.msaa_lod)
 
     def validate(self):
         if self.mode not in LEVEL_MODES:
@@ -206,6 +213,8 @@ class TessSettings:
             raise SceneError(f"tess views_per_pass must be a whole number in 1..{MAX_INVOCATIONS}, got {k!r}")
         if self.color_by not in COLOR_BY:
             raise SceneError(f"tess color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
+        if self.msaa_lod is not None and not isinstance(self.msaa_lod, (bool, np.bool_)):
+            raise SceneError(f"tess msaa_lod must be true, false or unset, got {self.msaa_lod!r}")
         if not isinstance(self.detail_levels, (bool, np.bool_)):
             raise SceneError(f"tess detail_levels must be true or false, got {self.detail_levels!r}")
         if self.inner_measure not in INNER_MEASURES:
@@ -434,7 +443,7 @@ class TessRenderer:
         for msg in notes:
             warnings.warn(msg, RuntimeWarning, stacklevel=3)
         if threshold is None:
-            div = aa.divisor(settings.msaa_lod)
+            div = aa.divisor(settings.msaa_lod_for(aa))
             threshold = (84.0 / div, 84.0 / div)
         tu, tv = (float(x) for x in threshold)
         if not (tu > 0 and tv > 0):
@@ -490,7 +499,7 @@ class TessRenderer:
             "msaa_samples": aa.msaa,
             "ssaa": aa.ss,
             "samples_per_pixel": aa.samples_per_pixel,
-            "lod_divisor": aa.divisor(settings.msaa_lod),
+            "lod_divisor": aa.divisor(settings.msaa_lod_for(aa)),
             "threshold": list(threshold),
             "tessellator": self.tessellator(settings),
             "tess": {"mode": settings.mode, "spacing": settings.spacing, "levels": list(settings.levels),
@@ -615,7 +624,7 @@ class TessRenderer:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         queries, draw_calls, start = [], 0, 0
-        div = aa.divisor(settings.msaa_lod)
+        div = aa.divisor(settings.msaa_lod_for(aa))
         for k, count in enumerate(counts):
             thr = (tu / DETAIL_DIVISORS[k], tv / DETAIL_DIVISORS[k])
             if k:
@@ -661,7 +670,7 @@ class TessRenderer:
         ctx = self.ctx
         t0 = time.perf_counter()
         modes = hybrid_tiers("tess", self.max_samples)
-        divisors = (1.0, *(d for d, _ in tier_divisors(modes, settings.msaa_lod)))
+        divisors = (1.0, *(d for d, _ in tier_divisors(modes, settings.msaa_lod_for(aa))))
         tier = render_tiers(render_list[:n])
         counts = np.bincount(tier, minlength=len(modes))
         starts = np.cumsum(counts) - counts   # each tier's first record in the ordered list
@@ -870,7 +879,7 @@ class Tessellation:
         """The Frame of ``camera``, or for a Views one Frame per view from one LOD pass for all."""
         t0 = time.perf_counter()
         _, aa, _ = self.tess.effective_aa(settings.tess.aa)
-        div = aa.divisor(settings.tess.msaa_lod)   # hybrid: 1, tier 0 is measured in output pixels
+        div = aa.divisor(settings.tess.msaa_lod_for(aa))   # hybrid: 1, tier 0 is measured in output pixels
         d = self.dev
         multi = isinstance(camera, Views)
         if multi:
@@ -879,7 +888,7 @@ class Tessellation:
         else:
             tiers, lod = None, settings.lod
             if aa.hybrid:   # tiers 1 and 2's (threshold divisor, spot-check scale)
-                tiers = tier_divisors(hybrid_tiers("tess", self.tess.max_samples), settings.tess.msaa_lod)
+                tiers = tier_divisors(hybrid_tiers("tess", self.tess.max_samples), settings.tess.msaa_lod_for(aa))
             elif settings.tess.detail_levels:   # the spot check's tiers in this mode's targets
                 tiers = tuple((div * d, d) for d in DETAIL_DIVISORS[1:])
                 lod = replace(lod, spot_silhouettes=False)   # edges: a matter of anti-aliasing, not levels

@@ -7,12 +7,14 @@ asserted."""
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
 from paramlod.app.bench.hybrid import VARIANTS, aims, format_hybrid, run_hybrid
 from paramlod.app.cli import main
 from paramlod.errors import ParamlodError
+from paramlod.renderers.aa import parse_aa
 
 SIZE = (64, 48)
 POINTS = ("points-hybrid", "points-16xSS", "points-noAA")
@@ -109,6 +111,8 @@ def test_run_hybrid_refuses_bad_arguments():
     (["--hybrid-scenes", "teapot"], "--hybrid-scenes: invalid choice: 'teapot'"),
     (["--hybrid-scenes", "seashell3", "seashell3"], "--hybrid-scenes: 'seashell3' is given twice"),
     (["--hybrid-reference", "best"], "--hybrid-reference: invalid choice: 'best'"),
+    (["--hybrid-variants", "tess-2xSS"], "--hybrid-variants: invalid choice: 'tess-2xSS'"),
+    (["--hybrid-variants", "tess-hybrid", "tess-hybrid"], "--hybrid-variants: 'tess-hybrid' is given twice"),
 ])
 def test_cli_refuses_bad_values_of_the_options(tmp_path, capsys, argv, message):
     with pytest.raises(SystemExit) as exc:
@@ -133,7 +137,14 @@ def test_bench_cli_runs_the_extra_with_tess_and_writes_json_markdown_plot(tmp_pa
         assert 0.0 <= r["flip"] <= 1.0 and sum(r["tier_patches"]) == r["render_patches"]
         if r["render_variant"] == "tess":
             assert r["aa_effective"] and r["triangles"] > 0
-    assert set(sc["aims"]) == {"tess", "tess-pair", "tess-finest", "points"}
+    assert set(sc["aims"]) == {"tess", "tess-pair", "tess-finest", "tess-guideline", "tess-ss-lod", "tess-segment",
+                               "points"}
+    # the hybrid's tiers divide their thresholds by sqrt(multisamples) too, unless msaa_lod is false
+    tiers = {r["variant"]: r["renderer_tiers"] for r in sc["rows"] if r["aa"] == "hybrid" and r["render_variant"] == "tess"}
+    for k in (1, 2):
+        finer, plain = tiers["tess-hybrid"][k], tiers["tess-hybrid-ss-lod"][k]
+        msaa = parse_aa(plain["aa"]).msaa
+        assert msaa > 1 and finer["threshold"][0] == pytest.approx(plain["threshold"][0] / math.sqrt(msaa)), (plain, finer)
     md = (tmp_path / "results.md").read_text()
     assert "## Hybrid anti-aliasing (issue #21)" in md and "| 0.6 | tess-hybrid" in md
     try:

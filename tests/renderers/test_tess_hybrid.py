@@ -86,13 +86,14 @@ def colour_error(f, ref, where=None):
 
 
 # how much closer to the finest tier's frame hybrid must be than noAA (mean absolute colour error,
-# FLIP), with the default divisors (tier 1 measured as uniform 4xMS, in output pixels) and with
-# msaa_lod (sqrt of each tier's samples per pixel); measured on llvmpipe: error 0.043 against 0.071
-# and FLIP 0.084 against 0.111; with msaa_lod 0.029 against 0.076 and 0.057 against 0.131
+# FLIP), with msaa_lod false (the tiers' uniform modes' divisors: tier 1 measured as uniform 4xMS,
+# in output pixels) and true (sqrt of each tier's samples per pixel, the hybrid's default; the
+# finest frame at those thresholds too); measured on llvmpipe: error 0.043 against 0.071 and FLIP
+# 0.084 against 0.111; with msaa_lod 0.029 against 0.076 and 0.057 against 0.131
 CLOSER = {False: (0.75, 0.9), True: (0.5, 0.6)}
 
 
-@pytest.fixture(scope="module", params=[False, True], ids=["default", "msaa_lod"])
+@pytest.fixture(scope="module", params=[False, True], ids=["uniform_divisors", "msaa_lod"])
 def shell(request):
     """seashell3 close up (128 x 96): bumps of a few pixels at the mouth, sub-pixel ones towards
     the apex, so every tier gets patches."""
@@ -130,6 +131,18 @@ def test_without_subpixel_detail_the_hybrid_frame_is_the_noaa_frame(sphere_scene
     assert (st["aa"], st["aa_effective"], st["tier_resolved"], st["samples_per_pixel"]) == ("hybrid", "hybrid", 0, 1)
     assert st["ms"]["carry"] == 0.0
     assert_same(hyb, plain)
+
+
+def test_by_default_the_tiers_take_the_guideline_and_the_uniform_modes_do_not(sphere_scene):
+    """TessSettings.msaa_lod unset: a hybrid frame's tiers measure patches at the thresholds divided
+    by sqrt of their samples per pixel (issue #21: sqrt(8), sqrt(32); 2 and 4 on llvmpipe), a
+    uniform multisampled frame at the threshold itself."""
+    cam = framing_camera(sphere_scene, (0.3, 0.4, 1.0), size=(96, 64))
+    hyb = frame(sphere_scene, cam, "hybrid", threshold=84.0, msaa_lod=None)
+    assert [t["threshold"] for t in hyb.stats["tiers"]] == [[84.0 / d] * 2 for d in divisors(True)]
+    assert frame(sphere_scene, cam, modes()[1].name, threshold=84.0, msaa_lod=None).stats["lod_divisor"] == 1.0
+    with pytest.raises(pl.SceneError, match="msaa_lod must be true, false or unset"):
+        pl.renderers.tess.TessSettings(msaa_lod="yes").validate()
 
 
 def test_silhouette_patches_are_multisampled(sphere_scene):
@@ -236,7 +249,7 @@ def test_a_carried_tier_keeps_its_resolve(two_spheres, coarse):
 
 def test_a_single_finest_tier_is_the_uniform_frame(two_spheres):
     scene, cam, rl, tess = two_spheres
-    top, d2 = modes()[-1], divisors()[2]
+    top, d2 = modes()[-1], divisors(msaa_lod=True)[2]   # the hybrid's tiers by default: the guideline's
     hyb = tess.draw(_with_tiers(rl, np.full(len(rl), 2)), None, scene, cam, TessSettings(aa="hybrid"),
                     threshold=(20.0, 20.0))
     uniform = tess.draw(rl, None, scene, cam, TessSettings(aa=top.name), threshold=(20.0 / d2, 20.0 / d2))

@@ -22,8 +22,13 @@ that scene; the result names the reference used and why. The reference is drawn 
 FLIP between the two draws (``redraw_flip``) is the floor under every row's FLIP (0 for a
 deterministic renderer).
 
-Aims (issue #21), per scene and per pair (tess-hybrid against tess-4xSS+8xMS, points-hybrid against
-points-16xSS): at each distance the hybrid's FLIP within 10 % of the uniform's (FLIP_AIM) and its
+The tess hybrid's tiers measure patches at the thresholds divided by sqrt(8) and sqrt(32) (the
+guideline the issue names; TessSettings.msaa_lod unset); ``tess-hybrid-ss-lod`` at those of the
+tiers' uniform modes (1 and 2, as before December 2026), ``tess-4xSS+8xMS-msaa-lod`` the uniform mode
+at the guideline's sqrt(32).
+
+Aims (issue #21), per scene and per pair (tess-hybrid against tess-4xSS+8xMS, and against it at the
+guideline's thresholds; points-hybrid against points-16xSS): at each distance the hybrid's FLIP within 10 % of the uniform's (FLIP_AIM) and its
 frame time at most half the uniform's (TIME_AIM); along the path the hybrid's frame time max / min
 at most 2 (SPREAD_AIM) while the uniform's varies more. Every missed aim is written out as a loss.
 
@@ -62,12 +67,22 @@ VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-pair": ("tess", "hyb
             "points-noAA": ("points", "noAA"), "tess-noAA": ("tess", "noAA"),
             # uniform 4xSS: on llvmpipe and an H100 it came closer to 4xSS+8xMS's (16xSS's) FLIP at
             # under half the time than the hybrid did (docs/hybrid.md); these rows measure that anywhere
-            "tess-4xSS": ("tess", "4xSS"), "points-4xSS": ("points", "4xSS")}
-# variants drawn with TessSettings.hybrid_targets other than the default "tiers"
-TESS_TARGETS = {"tess-hybrid-pair": "pair", "tess-hybrid-finest": "finest"}
+            "tess-4xSS": ("tess", "4xSS"), "points-4xSS": ("points", "4xSS"),
+            # TessSettings.msaa_lod: the hybrid's tiers at the thresholds of their uniform modes (1, 2)
+            # instead of the guideline's sqrt(8), sqrt(32); the uniform mode at the guideline's
+            "tess-hybrid-ss-lod": ("tess", "hybrid"), "tess-4xSS+8xMS-msaa-lod": ("tess", "4xSS+8xMS"),
+            # inner levels from the longest LOD segment (TessSettings.inner_measure): thin lobes whole
+            "tess-hybrid-segment": ("tess", "hybrid")}
+# variants drawn with TessSettings other than the defaults: name -> {field: value}
+TESS_SETTINGS = {"tess-hybrid-pair": {"hybrid_targets": "pair"}, "tess-hybrid-finest": {"hybrid_targets": "finest"},
+                 "tess-hybrid-ss-lod": {"msaa_lod": False}, "tess-4xSS+8xMS-msaa-lod": {"msaa_lod": True},
+                 "tess-hybrid-segment": {"inner_measure": "segment"}}
 # the hybrid variant and the uniform mode it is measured against
 PAIRS = {"tess": ("tess-hybrid", "tess-4xSS+8xMS"), "tess-pair": ("tess-hybrid-pair", "tess-4xSS+8xMS"),
          "tess-finest": ("tess-hybrid-finest", "tess-4xSS+8xMS"),
+         "tess-guideline": ("tess-hybrid", "tess-4xSS+8xMS-msaa-lod"),   # both at the guideline's thresholds
+         "tess-ss-lod": ("tess-hybrid-ss-lod", "tess-4xSS+8xMS"),
+         "tess-segment": ("tess-hybrid-segment", "tess-4xSS+8xMS"),
          "points": ("points-hybrid", "points-16xSS")}
 REFERENCE_TESS = ("tess", "16xSS+8xMS")
 REFERENCE_POINTS = ("points", "16xSS")
@@ -111,6 +126,9 @@ def add_arguments(p):
     p.add_argument("--hybrid-scenes", nargs="+", choices=list(HYBRID_SCENES), default=list(SCENES), action=_Distinct,
                    metavar="SCENE", help=f"hybrid: scenes (default {' '.join(SCENES)}; also any bench scenario: "
                                          f"{' '.join(SCENARIOS)})")
+    p.add_argument("--hybrid-variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS), action=_Distinct,
+                   metavar="VARIANT", help=f"hybrid: the variants drawn at each distance (default all: "
+                                           f"{' '.join(VARIANTS)})")
     p.add_argument("--hybrid-reference", choices=REFERENCES, default="auto",
                    help="hybrid: the reference image for FLIP: tess 16xSS+8xMS, points 16xSS at twice the "
                         "density, or auto (tess, points where tess fails or is too slow; default)")
@@ -334,7 +352,8 @@ def run_hybrid(size, frames: int = 8, warmup: int = 2, scenes=SCENES, distances=
                 variant, aa = VARIANTS[vname]
                 try:
                     rs = settings(variant, aa, threshold, l_max, l_min)
-                    rs.tess.hybrid_targets = TESS_TARGETS.get(vname, rs.tess.hybrid_targets)
+                    for field, value in TESS_SETTINGS.get(vname, {}).items():
+                        setattr(rs.tess, field, value)
                     row, image = measure(scene, cams[d], variant, aa, rs, frames, warmup)
                     row["flip"] = flip(refs[d], image)
                 except (ParamlodError, NotImplementedError) as exc:

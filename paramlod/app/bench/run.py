@@ -380,7 +380,8 @@ def run_bench(args) -> int:
         save()
     if "hybrid" in args.extras:
         result["hybrid"] = run_hybrid(size, args.frames, args.warmup, args.hybrid_scenes, args.hybrid_distances,
-                                      reference=args.hybrid_reference, log=lambda m: print(m, flush=True))
+                                      args.hybrid_variants, reference=args.hybrid_reference,
+                                      log=lambda m: print(m, flush=True))
         save()
     if "mesh-eval" in args.extras:
         big = args.big_mesh == "yes" or (args.big_mesh == "auto" and dev.is_gpu)
