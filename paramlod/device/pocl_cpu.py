@@ -1,13 +1,12 @@
 """Name a CPU that PoCL's LLVM does not know, so that PoCL can compile for it.
 
 The PoCL that ``pip install 'pyopencl[pocl]'`` brings (3.0, a DISTRO build on LLVM 14) asks LLVM for
-the host CPU's name and passes it to clang as ``-target-cpu``. LLVM 14 knows AMD's CPUs up to Zen 3
-and Zen 4 (family 19h, named "znver3"); a newer one (Zen 5, family 1Ah) it names "generic", which
-clang refuses: every build fails with "unknown target CPU 'generic'" (pocl/pocl#1049). PoCL 3.0 has
-no setting for the name, so before the context is made we point the device's name at "znver3",
-the name LLVM 14 gave the Zen 4 machines this project was measured on. Every such CPU runs
-znver3's instructions (x86-64-v3 and more); the built-in library PoCL links is chosen from the CPU's
-features, not from this name, so it is the same library as before.
+the host CPU's name and passes it to clang as ``-target-cpu``. LLVM 14 names AMD's family 19h
+(Zen 3 and Zen 4) "znver3"; a newer CPU (Zen 5, family 1Ah) it names "generic", which clang
+refuses: every build fails with "unknown target CPU 'generic'" (pocl/pocl#1049). PoCL 3.0 has no
+setting for the name, so before the context is made we point the device's name at "znver3", the
+newest AMD name LLVM 14 has. Every newer AMD CPU runs znver3's instructions; the built-in library
+PoCL links is chosen from the CPU's features, not from this name.
 
 The device record is PoCL's own C struct. The name is found there, not assumed at an offset: the
 pointer to "generic" that follows the pointer to the target triple ("x86_64-..."), read through
@@ -29,8 +28,8 @@ def needs_cpu_name(device) -> bool:
     """True for a PoCL CPU device that LLVM named "generic" (its version string ends so)."""
     import pyopencl as cl
 
-    return (device.type & cl.device_type.CPU and "Portable Computing Language" in device.platform.name
-            and device.version.strip().endswith("-generic"))
+    return bool(device.type & cl.device_type.CPU and "Portable Computing Language" in device.platform.name
+                and device.version.strip().endswith("-generic"))
 
 
 def _reader():

@@ -140,11 +140,12 @@ def test_bench_cli_runs_the_extra_with_tess_and_writes_json_markdown_plot(tmp_pa
     assert set(sc["aims"]) == {"tess", "tess-pair", "tess-finest", "tess-guideline", "tess-ss-lod", "tess-segment",
                                "points"}
     # the hybrid's tiers divide their thresholds by sqrt(multisamples) too, unless msaa_lod is false
-    tiers = {r["variant"]: r["renderer_tiers"] for r in sc["rows"] if r["aa"] == "hybrid" and r["render_variant"] == "tess"}
+    tiers = {r["variant"]: r["renderer_tiers"] for r in sc["rows"] if "renderer_tiers" in r}
     for k in (1, 2):
         finer, plain = tiers["tess-hybrid"][k], tiers["tess-hybrid-ss-lod"][k]
         msaa = parse_aa(plain["aa"]).msaa
-        assert msaa > 1 and finer["threshold"][0] == pytest.approx(plain["threshold"][0] / math.sqrt(msaa)), (plain, finer)
+        assert msaa > 1, plain
+        assert finer["threshold"][0] == pytest.approx(plain["threshold"][0] / math.sqrt(msaa)), (plain, finer)
     md = (tmp_path / "results.md").read_text()
     assert "## Hybrid anti-aliasing (issue #21)" in md and "| 0.6 | tess-hybrid" in md
     try:

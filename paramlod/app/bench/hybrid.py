@@ -28,9 +28,10 @@ tiers' uniform modes (1 and 2, as before December 2026), ``tess-4xSS+8xMS-msaa-l
 at the guideline's sqrt(32).
 
 Aims (issue #21), per scene and per pair (tess-hybrid against tess-4xSS+8xMS, and against it at the
-guideline's thresholds; points-hybrid against points-16xSS): at each distance the hybrid's FLIP within 10 % of the uniform's (FLIP_AIM) and its
-frame time at most half the uniform's (TIME_AIM); along the path the hybrid's frame time max / min
-at most 2 (SPREAD_AIM) while the uniform's varies more. Every missed aim is written out as a loss.
+guideline's thresholds; points-hybrid against points-16xSS): at each distance the hybrid's FLIP
+within 10 % of the uniform's (FLIP_AIM) and its frame time at most half the uniform's (TIME_AIM);
+along the path the hybrid's frame time max / min at most 2 (SPREAD_AIM) while the uniform's varies
+more. Every missed aim is written out as a loss.
 
 Driven by paramlod.app.bench.run (``paramlod bench --only-extras --extras hybrid``); ``run_hybrid``
 is usable alone. No twin (a measurement). flip_evaluator and matplotlib are imported when used
@@ -66,7 +67,7 @@ VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-pair": ("tess", "hyb
             "points-hybrid": ("points", "hybrid"), "points-16xSS": ("points", "16xSS"),
             "points-noAA": ("points", "noAA"), "tess-noAA": ("tess", "noAA"),
             # uniform 4xSS: on llvmpipe and an H100 it came closer to 4xSS+8xMS's (16xSS's) FLIP at
-            # under half the time than the hybrid did (docs/hybrid.md); these rows measure that anywhere
+            # under half the time than the hybrid with its tiers' uniform divisors did (docs/hybrid.md)
             "tess-4xSS": ("tess", "4xSS"), "points-4xSS": ("points", "4xSS"),
             # TessSettings.msaa_lod: the hybrid's tiers at the thresholds of their uniform modes (1, 2)
             # instead of the guideline's sqrt(8), sqrt(32); the uniform mode at the guideline's
