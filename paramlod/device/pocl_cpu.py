@@ -32,28 +32,24 @@ def needs_cpu_name(device) -> bool:
                 and device.version.strip().endswith("-generic"))
 
 
-def _reader():
-    mem = open("/proc/self/mem", "rb", buffering=0)
-
-    def read(addr: int, n: int) -> bytes | None:
-        if addr < 4096:
-            return None
-        try:
-            mem.seek(addr)
-            return mem.read(n)
-        except (OSError, ValueError, OverflowError):
-            return None
-    return mem, read
+def _read(mem, addr: int, n: int) -> bytes | None:
+    """``n`` bytes of this process at ``addr`` (``mem``: /proc/self/mem), or None where none are mapped."""
+    if addr < 4096:
+        return None
+    try:
+        mem.seek(addr)
+        return mem.read(n)
+    except (OSError, ValueError, OverflowError):
+        return None
 
 
 def name_cpu(device) -> None:
     """Point ``device``'s LLVM CPU name at LLVM_CPU (see the module's docstring)."""
-    mem, read = _reader()
-    with mem:
-        record = read(device.int_ptr, _RECORD_BYTES) or b""
+    with open("/proc/self/mem", "rb", buffering=0) as mem:
+        record = _read(mem, device.int_ptr, _RECORD_BYTES) or b""
         words = struct.unpack(f"<{len(record) // 8}Q", record[: len(record) // 8 * 8])
         slots = [i for i in range(1, len(words))
-                 if read(words[i], 8) == b"generic\0" and read(words[i - 1], 7) == b"x86_64-"]
+                 if _read(mem, words[i], 8) == b"generic\0" and _read(mem, words[i - 1], 7) == b"x86_64-"]
     if len(slots) != 1:
         raise DeviceError(
             f"PoCL cannot compile for this CPU: its LLVM names it 'generic' ({device.version.strip()}), and "

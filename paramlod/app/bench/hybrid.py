@@ -50,7 +50,7 @@ import numpy as np
 from paramlod.app.args import positive_float
 from paramlod.app.bench.mesh_eval import flip
 from paramlod.app.bench.plots import pyplot, save_figure
-from paramlod.app.bench.scenes import SCENARIOS
+from paramlod.app.bench.scenes import SCENARIOS, apply_variant_settings
 from paramlod.core.camera import Camera
 from paramlod.errors import ParamlodError
 from paramlod.pipeline.driver import render
@@ -74,10 +74,6 @@ VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-pair": ("tess", "hyb
             "tess-hybrid-ss-lod": ("tess", "hybrid"), "tess-4xSS+8xMS-msaa-lod": ("tess", "4xSS+8xMS"),
             # inner levels from the longest LOD segment (TessSettings.inner_measure): thin lobes whole
             "tess-hybrid-segment": ("tess", "hybrid")}
-# variants drawn with TessSettings other than the defaults: name -> {field: value}
-TESS_SETTINGS = {"tess-hybrid-pair": {"hybrid_targets": "pair"}, "tess-hybrid-finest": {"hybrid_targets": "finest"},
-                 "tess-hybrid-ss-lod": {"msaa_lod": False}, "tess-4xSS+8xMS-msaa-lod": {"msaa_lod": True},
-                 "tess-hybrid-segment": {"inner_measure": "segment"}}
 # the hybrid variant and the uniform mode it is measured against
 PAIRS = {"tess": ("tess-hybrid", "tess-4xSS+8xMS"), "tess-pair": ("tess-hybrid-pair", "tess-4xSS+8xMS"),
          "tess-finest": ("tess-hybrid-finest", "tess-4xSS+8xMS"),
@@ -353,8 +349,7 @@ def run_hybrid(size, frames: int = 8, warmup: int = 2, scenes=SCENES, distances=
                 variant, aa = VARIANTS[vname]
                 try:
                     rs = settings(variant, aa, threshold, l_max, l_min)
-                    for field, value in TESS_SETTINGS.get(vname, {}).items():
-                        setattr(rs.tess, field, value)
+                    apply_variant_settings(rs, vname)   # the variants' own settings: scenes.VARIANT_SETTINGS
                     row, image = measure(scene, cams[d], variant, aa, rs, frames, warmup)
                     row["flip"] = flip(refs[d], image)
                 except (ParamlodError, NotImplementedError) as exc:

@@ -25,6 +25,13 @@ VARIANT_SETTINGS = {
     "tess-chord": {("tess", "mode"): "chord", ("tess", "l_min"): 1.0},      # docs/tessellation.md, "Tessellation levels"
     "tess-segment": {("tess", "inner_measure"): "segment"},                 # docs/tessellation.md, "Tessellation levels"
     "tess-detail": {("tess", "detail_levels"): True},                       # docs/hybrid.md, "Detail levels"
+    # rows of the hybrid extra (paramlod.app.bench.hybrid): its tiers drawn with fewer carries, at
+    # the tiers' uniform divisors or with segment inner levels; the uniform mode at the guideline's
+    "tess-hybrid-pair": {("tess", "hybrid_targets"): "pair"},
+    "tess-hybrid-finest": {("tess", "hybrid_targets"): "finest"},
+    "tess-hybrid-ss-lod": {("tess", "msaa_lod"): False},
+    "tess-hybrid-segment": {("tess", "inner_measure"): "segment"},
+    "tess-4xSS+8xMS-msaa-lod": {("tess", "msaa_lod"): True},
 }
 
 
