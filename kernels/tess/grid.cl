@@ -76,6 +76,18 @@ inline float grid_chord_level(float bend, float chord, float2 lclamp) {
     return clamp(isnan(l) ? lclamp.x : l, lclamp.x, lclamp.y);
 }
 
+// The parameter range a patch's vertices span: sampled_range, and where overlap_px > 0 (a hybrid
+// tier carried into a finer one) at least that many output pixels of its measured extents per
+// side, at most 0.25 of its size (tess_control.glsl).
+inline float4 grid_range(RenderPatch rp, __global const float* I, float overlap, float overlap_px) {
+    if (overlap_px <= 0.0f) return sampled_range(rp.range, I, overlap);
+    float2 e = rp.ext.xy;
+    float wu = (rp.range.y - rp.range.x) * fmax(overlap, e.x > 0.0f ? fmin(overlap_px / e.x, 0.25f) : 0.0f);
+    float wv = (rp.range.w - rp.range.z) * fmax(overlap, e.y > 0.0f ? fmin(overlap_px / e.y, 0.25f) : 0.0f);
+    return (float4)(fmax(rp.range.x - wu, I[INST_DOMAIN + 0]), fmin(rp.range.y + wu, I[INST_DOMAIN + 1]),
+                    fmax(rp.range.z - wv, I[INST_DOMAIN + 2]), fmin(rp.range.w + wv, I[INST_DOMAIN + 3]));
+}
+
 // One work-item per render patch: its levels record. kind 0 (fixed): rule.xy the (inner, outer)
 // levels; 1 (adaptive): rule (L inner, L outer, t_u, t_v), the inner levels from e_u, e_v (or
 // from s_u, s_v where larger, with inner_segment); 2 (chord): rule.x the chord error in pixels,
@@ -163,7 +175,8 @@ inline int grid_visit(int8 L, int l, bool columns) {
 __kernel void grid_vertices(__global const RenderPatch* patches, uint count, __global const int8* levels,
                             __global const uint* vert_start,
                             __global const float* inst_f, __global const uint* inst_u, __global const float* params,
-                            float overlap, __global GridVertex* out, volatile __global uint* nan_count) {
+                            float overlap, float overlap_px, __global GridVertex* out,
+                            volatile __global uint* nan_count) {
 #if PL_RUN > 1
     float C[PL_SPLIT_FLOATS];
     uint carried_patch = 0xffffffffu;   // C holds the split's steps at carried_at for this patch
@@ -189,7 +202,7 @@ __kernel void grid_vertices(__global const RenderPatch* patches, uint count, __g
         int8 L = levels[lo];
         int l = grid_visit(L, (int)(g - vert_start[lo]), split == PL_SPLIT_U);
         float2 t = grid_vertex_t(L, l);
-        float4 range = sampled_range(rp.range, I, overlap);
+        float4 range = grid_range(rp, I, overlap, overlap_px);
         float u = grid_lerp(range.x, range.y, t.x), v = grid_lerp(range.z, range.w, t.y);
         float uc = 0.5f * (rp.range.x + rp.range.y), vc = 0.5f * (rp.range.z + rp.range.w);
         float3 pos, n;

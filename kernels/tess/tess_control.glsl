@@ -18,7 +18,10 @@
 //             kernels/tess/grid.cl computes the same levels for the grid tessellator.
 // The parameter range handed to the evaluation stage is widened by u_overlap of its size per
 // side (clamped to the function's domain) so that T-junctions between patches of different size
-// are covered.
+// are covered. A hybrid tier whose targets are carried into a finer tier's is widened by
+// u_overlap_px output pixels as well, from the patch's measured extents: its coverage is copied
+// per pixel (noAA) or per sample index (8xMS) to samples up to a pixel away, so without it a
+// pixel on its seam with a finer tier's patch kept samples neither covers.
 layout(vertices = 1) out;
 
 in vec4 vs_range[];
@@ -37,6 +40,7 @@ uniform float u_chord;       // chord: the most a chord may stray from the surfa
 uniform int u_inner_segment; // adaptive: inner levels from s_u, s_v where larger (TessSettings.inner_measure)
 uniform float u_near;
 uniform float u_overlap;
+uniform float u_overlap_px;  // hybrid: a carried tier's widening in output pixels (0: none)
 
 float pl_adaptive(float e, float L, float t) {
     float l = e * L / min(t, L);
@@ -176,7 +180,13 @@ void main() {
             gl_TessLevelInner[0] = u_level.x; gl_TessLevelInner[1] = u_level.x;
         }
         vec4 dom = pl_domain(inst);
-        float wu = (r.y - r.x) * u_overlap, wv = (r.w - r.z) * u_overlap;
+        vec2 w = vec2(u_overlap);
+        if (u_overlap_px > 0.0) {   // at most the largest overlap there is; an unmeasured extent adds none
+            vec2 e = vs_ext[0].xy;
+            w = max(w, vec2(e.x > 0.0 ? min(u_overlap_px / e.x, 0.25) : 0.0,
+                            e.y > 0.0 ? min(u_overlap_px / e.y, 0.25) : 0.0));
+        }
+        float wu = (r.y - r.x) * w.x, wv = (r.w - r.z) * w.y;
         tc_range = vec4(max(r.x - wu, dom.x), min(r.y + wu, dom.y), max(r.z - wv, dom.z), min(r.w + wv, dom.w));
         tc_core = r;
         tc_inst = inst;

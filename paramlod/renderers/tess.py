@@ -99,6 +99,12 @@ GRID_FORMAT = vertex_format(GRID_VERTEX, ("pos", "normal", "inst"))   # "4f 3f 1
 # TessSettings.detail_levels: the threshold divisors of the spot check's tiers 0, 1, 2 (the pixel of
 # 8xMS and of 4xSS+8xMS: the detail each tier's spot check looks for)
 DETAIL_DIVISORS = (1.0, math.sqrt(8.0), math.sqrt(32.0))
+# hybrid: how far, in output pixels, a tier carried into a finer tier's targets reaches past its
+# patches' edges (tess_control.glsl): its coverage is copied to samples up to a pixel from where it
+# was decided (0.71 from a noAA pixel's centre), so the seam with a finer tier's patch must be
+# covered that far on both sides. Measured on llvmpipe, seashell3 at 128 x 96: 17 uncovered
+# samples' pixels inside the shell without it, none with it
+CARRY_OVERLAP_PX = 1.0
 HYBRID_VIEWS = ('anti-aliasing "hybrid" draws one view at a time (its tiers carry one view\'s targets into the '
                 'next); render each camera with render(), or use another mode for render_views')
 
@@ -481,6 +487,7 @@ class TessRenderer:
         set_uniform(prog, "u_inner_segment", int(settings.inner_measure == "segment"))
         set_uniform(prog, "u_clamp", (float(settings.l_min), float(settings.l_max)))
         set_uniform(prog, "u_overlap", float(settings.overlap))
+        set_uniform(prog, "u_overlap_px", 0.0)
         set_uniform(prog, "u_light", tuple(float(x) for x in LIGHT))
         set_uniform(prog, "u_tier", 0 if settings.color_by == "tier" else -1)   # -1: the material's colour
         for binding, b in enumerate((self._params, self._inst_f, self._inst_u, self._materials)):
@@ -511,19 +518,22 @@ class TessRenderer:
         }
 
     def _draw_list(self, prog, patches, settings, threshold, passes=(None,), before=None, start=0, camera=None,
-                   scene=None, chord=None):
+                   scene=None, chord=None, overlap_px: float = 0.0):
         """Draw the uploaded records ``patches`` (from record ``start`` on) with ``prog`` and the
         thresholds ``threshold`` once per pass (``before(pass)`` sets each up); returns (a
         primitives query per pass, none without patches; draw calls). ``chord``: mode "chord"'s
         error in output pixels for these patches (the targets' pixel, as the thresholds are
-        divided; default ``settings.chord_px``). With the grid tessellator (one view: the
+        divided; default ``settings.chord_px``). ``overlap_px``: how far the patches reach past
+        their edges in output pixels (CARRY_OVERLAP_PX for a hybrid tier whose targets are
+        carried; 0: ``settings.overlap`` alone). With the grid tessellator (one view: the
         ``scene`` seen by ``camera``) ``prog`` is the grid program and the records are
         tessellated in OpenCL first."""
         if chord is not None:
             set_uniform(prog, "u_chord", float(chord))
             settings = replace(settings, chord_px=float(chord))
+        set_uniform(prog, "u_overlap_px", float(overlap_px))
         if camera is not None and self.tessellator(settings) == "grid":
-            return self._draw_grid(prog, patches, settings, threshold, scene, camera)
+            return self._draw_grid(prog, patches, settings, threshold, scene, camera, overlap_px)
         queries, draw_calls = [], 0
         batches = self.draw_batches(patches, settings, threshold)
         if batches:
@@ -539,14 +549,14 @@ class TessRenderer:
                         draw_calls += 1
         return queries, draw_calls
 
-    def _draw_grid(self, prog, patches, settings, threshold, scene, camera):
+    def _draw_grid(self, prog, patches, settings, threshold, scene, camera, overlap_px: float = 0.0):
         """``_draw_list`` with the grid tessellator: the triangles of ``patches`` in one draw; the
         NaN vertices it found are added to the counters the evaluation stage would have counted."""
         if not len(patches):
             return [], 0
         if self._grid is None:
             self._grid = GridTessellator(self.functions)
-        grid = self._grid.tessellate(patches, scene, camera, settings, threshold)
+        grid = self._grid.tessellate(patches, scene, camera, settings, threshold, overlap_px=overlap_px)
         self._grid_vertices.write(grid.vertices)   # contiguous arrays: no copy on the host
         self._grid_indices.write(grid.indices)
         if grid.nan_vertices:
@@ -712,7 +722,8 @@ class TessRenderer:
             first = int(starts[k])
             queries, calls = self._draw_list(prog, ordered[first:first + int(counts[k])], settings,
                                              tuple(tiers[k]["threshold"]), start=first, camera=camera, scene=scene,
-                                             chord=settings.chord_px / divisors[k])
+                                             chord=settings.chord_px / divisors[k],
+                                             overlap_px=CARRY_OVERLAP_PX if tg is not finest else 0.0)
             tiers[k]["triangles"] = sum(int(q.primitives) for q in queries)
             draw_calls += calls
             ctx.finish()

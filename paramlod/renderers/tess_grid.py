@@ -82,10 +82,12 @@ class GridTessellator:
         self._indices = cl.Kernel(program, "grid_indices")
         self.buffers = SceneBuffers(LIGHT)
 
-    def tessellate(self, records: np.ndarray, scene, camera, settings, threshold, levels=None) -> Grid:
+    def tessellate(self, records: np.ndarray, scene, camera, settings, threshold, levels=None,
+                   overlap_px: float = 0.0) -> Grid:
         """The triangles of the render ``records`` (RENDER_DTYPE) of ``scene`` seen by ``camera``,
         with the levels ``settings`` (TessSettings) and ``threshold`` (t_u, t_v in output pixels)
-        give, or with the given ``levels`` records (int32 (n, 8), LEVELS; tests)."""
+        give, or with the given ``levels`` records (int32 (n, 8), LEVELS; tests); ``overlap_px``:
+        a hybrid tier's widening in output pixels where its targets are carried (grid.cl grid_range)."""
         dev = cl_device()
         q = dev.queue
         d = self.buffers.upload(scene, camera)
@@ -115,7 +117,7 @@ class GridTessellator:
         indices = cla.empty(q, 3 * n_triangles, np.uint32)
         nan = cla.zeros(q, 1, np.uint32)
         self._vertices.set_args(patches.data, np.uint32(n), levels.data, vert_start.data, *d["inst"],
-                                np.float32(settings.overlap), vertices.data, nan.data)
+                                np.float32(settings.overlap), np.float32(overlap_px), vertices.data, nan.data)
         items = -(-n_vertices // self.run)
         launch(q, self._vertices, (-(-items // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
         self._indices.set_args(np.uint32(n), levels.data, vert_start.data, tri_start.data, indices.data)
