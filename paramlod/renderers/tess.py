@@ -102,8 +102,8 @@ DETAIL_DIVISORS = (1.0, math.sqrt(8.0), math.sqrt(32.0))
 # hybrid: how far, in output pixels, a tier carried into a finer tier's targets reaches past its
 # patches' edges (tess_control.glsl): its coverage is copied to samples up to a pixel from where it
 # was decided (0.71 from a noAA pixel's centre), so the seam with a finer tier's patch must be
-# covered that far on both sides. Measured on llvmpipe, seashell3 at 128 x 96: 17 uncovered
-# samples' pixels inside the shell without it, none with it
+# covered that far on both sides. Measured on llvmpipe, seashell3 at 128 x 96: without it 17 pixels
+# inside the shell kept an uncovered sample, with it none
 CARRY_OVERLAP_PX = 1.0
 HYBRID_VIEWS = ('anti-aliasing "hybrid" draws one view at a time (its tiers carry one view\'s targets into the '
                 'next); render each camera with render(), or use another mode for render_views')
@@ -487,7 +487,6 @@ class TessRenderer:
         set_uniform(prog, "u_inner_segment", int(settings.inner_measure == "segment"))
         set_uniform(prog, "u_clamp", (float(settings.l_min), float(settings.l_max)))
         set_uniform(prog, "u_overlap", float(settings.overlap))
-        set_uniform(prog, "u_overlap_px", 0.0)
         set_uniform(prog, "u_light", tuple(float(x) for x in LIGHT))
         set_uniform(prog, "u_tier", 0 if settings.color_by == "tier" else -1)   # -1: the material's colour
         for binding, b in enumerate((self._params, self._inst_f, self._inst_u, self._materials)):
@@ -549,7 +548,7 @@ class TessRenderer:
                         draw_calls += 1
         return queries, draw_calls
 
-    def _draw_grid(self, prog, patches, settings, threshold, scene, camera, overlap_px: float = 0.0):
+    def _draw_grid(self, prog, patches, settings, threshold, scene, camera, overlap_px: float):
         """``_draw_list`` with the grid tessellator: the triangles of ``patches`` in one draw; the
         NaN vertices it found are added to the counters the evaluation stage would have counted."""
         if not len(patches):
