@@ -50,8 +50,13 @@ inline bool is_bad3(float3 p) {
 // size per side and clamped to the instance's domain. One definition for the point renderer
 // (points.cl point_grid) and for the bounds that must hold over what it samples (lod.cl
 // cone_uv, occlusion.cl patch_bound); twins: the same arithmetic in float32 numpy.
-inline float4 sampled_range(float4 range, __global const float* I, float widen) {
-    float wu = (range.y - range.x) * widen, wv = (range.w - range.z) * widen;
+// sampled_range_uv takes a share per axis (widen.x along u, widen.y along v: tess/grid.cl grid_range).
+inline float4 sampled_range_uv(float4 range, __global const float* I, float2 widen) {
+    float wu = (range.y - range.x) * widen.x, wv = (range.w - range.z) * widen.y;
     return (float4)(fmax(range.x - wu, I[INST_DOMAIN + 0]), fmin(range.y + wu, I[INST_DOMAIN + 1]),
                     fmax(range.z - wv, I[INST_DOMAIN + 2]), fmin(range.w + wv, I[INST_DOMAIN + 3]));
+}
+
+inline float4 sampled_range(float4 range, __global const float* I, float widen) {
+    return sampled_range_uv(range, I, (float2)(widen, widen));
 }

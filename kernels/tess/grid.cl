@@ -82,10 +82,8 @@ inline float grid_chord_level(float bend, float chord, float2 lclamp) {
 inline float4 grid_range(RenderPatch rp, __global const float* I, float overlap, float overlap_px) {
     if (overlap_px <= 0.0f) return sampled_range(rp.range, I, overlap);
     float2 e = rp.ext.xy;
-    float wu = (rp.range.y - rp.range.x) * fmax(overlap, e.x > 0.0f ? fmin(overlap_px / e.x, 0.25f) : 0.0f);
-    float wv = (rp.range.w - rp.range.z) * fmax(overlap, e.y > 0.0f ? fmin(overlap_px / e.y, 0.25f) : 0.0f);
-    return (float4)(fmax(rp.range.x - wu, I[INST_DOMAIN + 0]), fmin(rp.range.y + wu, I[INST_DOMAIN + 1]),
-                    fmax(rp.range.z - wv, I[INST_DOMAIN + 2]), fmin(rp.range.w + wv, I[INST_DOMAIN + 3]));
+    return sampled_range_uv(rp.range, I, (float2)(fmax(overlap, e.x > 0.0f ? fmin(overlap_px / e.x, 0.25f) : 0.0f),
+                                                  fmax(overlap, e.y > 0.0f ? fmin(overlap_px / e.y, 0.25f) : 0.0f)));
 }
 
 // One work-item per render patch: its levels record. kind 0 (fixed): rule.xy the (inner, outer)
