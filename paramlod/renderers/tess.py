@@ -94,7 +94,7 @@ COLOR_BY = ("material", "tier")   # TessSettings.color_by
 HYBRID_TARGETS = ("tiers", "pair", "finest")   # TessSettings.hybrid_targets
 TESSELLATORS = ("auto", "hardware", "grid")     # TessSettings.tessellator
 LEVEL_MODES = ("fixed", "adaptive", "chord")    # TessSettings.mode, by the control stage's u_adaptive
-INNER_MEASURES = ("extent", "segment")          # TessSettings.inner_measure
+INNER_MEASURES = ("detail", "extent", "segment")   # TessSettings.inner_measure
 GRID_FORMAT = vertex_format(GRID_VERTEX, ("pos", "normal", "inst"))   # "4f 3f 1u"
 # TessSettings.detail_levels: the threshold divisors of the spot check's tiers 0, 1, 2 (the pixel of
 # 8xMS and of 4xSS+8xMS: the detail each tier's spot check looks for)
@@ -158,7 +158,10 @@ class TessSettings:
     s_u, s_v where larger (7 times the longest single LOD segment, what the point renderer
     samples by), so the fastest-moving part of a patch gets pixel-long segments too: a thin SH
     lobe that the polylines pass beside is no longer cut short (order-12 glyphs of 60 px: IoU
-    0.89-0.90 -> 0.97), at about 4x the triangles of a glyph field (docs/tessellation.md).
+    0.89-0.90 -> 0.97), at about 4x the triangles of a glyph field (docs/tessellation.md);
+    "detail" (default): "segment" for the patches the spot check sent on (the hybrid's tiers 1
+    and 2, ``detail_levels``' finer levels), "extent" for the rest, so every other frame is the
+    thesis's (20-px order-12 glyphs, hybrid: IoU 0.73 -> 0.91; docs/hybrid.md).
 
     ``tessellator``: "hardware", GL's tessellation stages; "grid", the patches tessellated in
     OpenCL with the same levels rounded up to whole segments (equal spacing, so ``spacing`` does
@@ -186,7 +189,14 @@ class TessSettings:
     detail_levels: bool = False
     tessellator: str = "auto"
     chord_px: float = 0.25
-    inner_measure: str = "extent"
+    inner_measure: str = "detail"
+
+    def inner_levels_for(self, detail: bool) -> str:
+        """The inner measure ("extent" or "segment") of patches that the spot check sent on
+        (``detail``) or not."""
+        if self.inner_measure == "detail":
+            return "segment" if detail else "extent"
+        return self.inner_measure
 
     def msaa_lod_for(self, aa: AAMode) -> bool:
         """Whether the LOD thresholds of AA mode ``aa`` are divided by sqrt(multisamples) too:
@@ -484,7 +494,6 @@ class TessRenderer:
             set_uniform(prog, "u_level", (float(settings.base_level), float(settings.base_level)))
         set_uniform(prog, "u_adaptive", LEVEL_MODES.index(settings.mode))
         set_uniform(prog, "u_chord", float(settings.chord_px))
-        set_uniform(prog, "u_inner_segment", int(settings.inner_measure == "segment"))
         set_uniform(prog, "u_clamp", (float(settings.l_min), float(settings.l_max)))
         set_uniform(prog, "u_overlap", float(settings.overlap))
         set_uniform(prog, "u_light", tuple(float(x) for x in LIGHT))
@@ -517,20 +526,23 @@ class TessRenderer:
         }
 
     def _draw_list(self, prog, patches, settings, threshold, passes=(None,), before=None, start=0, camera=None,
-                   scene=None, chord=None, overlap_px: float = 0.0):
+                   scene=None, chord=None, overlap_px: float = 0.0, detail: bool = False):
         """Draw the uploaded records ``patches`` (from record ``start`` on) with ``prog`` and the
         thresholds ``threshold`` once per pass (``before(pass)`` sets each up); returns (a
         primitives query per pass, none without patches; draw calls). ``chord``: mode "chord"'s
         error in output pixels for these patches (the targets' pixel, as the thresholds are
         divided; default ``settings.chord_px``). ``overlap_px``: how far the patches reach past
         their edges in output pixels (CARRY_OVERLAP_PX for a hybrid tier whose targets are
-        carried; 0: ``settings.overlap`` alone). With the grid tessellator (one view: the
+        carried; 0: ``settings.overlap`` alone). ``detail``: the spot check sent these patches on
+        (their inner measure, ``TessSettings.inner_levels_for``). With the grid tessellator (one view: the
         ``scene`` seen by ``camera``) ``prog`` is the grid program and the records are
         tessellated in OpenCL first."""
         if chord is not None:
             set_uniform(prog, "u_chord", float(chord))
             settings = replace(settings, chord_px=float(chord))
         set_uniform(prog, "u_overlap_px", float(overlap_px))
+        settings = replace(settings, inner_measure=settings.inner_levels_for(detail))
+        set_uniform(prog, "u_inner_segment", int(settings.inner_measure == "segment"))
         if camera is not None and self.tessellator(settings) == "grid":
             return self._draw_grid(prog, patches, settings, threshold, scene, camera, overlap_px)
         queries, draw_calls = [], 0
@@ -639,7 +651,8 @@ class TessRenderer:
             if k:
                 set_uniform(prog, "u_threshold", thr)
             q, calls = self._draw_list(prog, render_list[start:start + int(count)], settings, thr, start=start,
-                                       camera=camera, scene=scene, chord=settings.chord_px / (div * DETAIL_DIVISORS[k]))
+                                       camera=camera, scene=scene, chord=settings.chord_px / (div * DETAIL_DIVISORS[k]),
+                                       detail=k > 0)
             queries, draw_calls, start = queries + q, draw_calls + calls, start + int(count)
         triangles = sum(int(q.primitives) for q in queries)
         ctx.finish()
@@ -722,7 +735,7 @@ class TessRenderer:
             queries, calls = self._draw_list(prog, ordered[first:first + int(counts[k])], settings,
                                              tuple(tiers[k]["threshold"]), start=first, camera=camera, scene=scene,
                                              chord=settings.chord_px / divisors[k],
-                                             overlap_px=CARRY_OVERLAP_PX if tg is not finest else 0.0)
+                                             overlap_px=CARRY_OVERLAP_PX if tg is not finest else 0.0, detail=k > 0)
             tiers[k]["triangles"] = sum(int(q.primitives) for q in queries)
             draw_calls += calls
             ctx.finish()

@@ -138,7 +138,7 @@ def test_bench_cli_runs_the_extra_with_tess_and_writes_json_markdown_plot(tmp_pa
         if r["render_variant"] == "tess":
             assert r["aa_effective"] and r["triangles"] > 0
     assert set(sc["aims"]) == {"tess", "tess-pair", "tess-finest", "tess-guideline", "tess-ss-lod", "tess-segment",
-                               "points"}
+                               "tess-extent", "points", "points-quad"}
     # the hybrid's tiers divide their thresholds by sqrt(multisamples) too, unless msaa_lod is false
     tiers = {r["variant"]: r["renderer_tiers"] for r in sc["rows"] if "renderer_tiers" in r}
     for k in (1, 2):
@@ -146,6 +146,12 @@ def test_bench_cli_runs_the_extra_with_tess_and_writes_json_markdown_plot(tmp_pa
         msaa = parse_aa(plain["aa"]).msaa
         assert msaa > 1, plain
         assert finer["threshold"][0] == pytest.approx(plain["threshold"][0] / math.sqrt(msaa)), (plain, finer)
+    # the default inner levels are the extents' in tier 0 and the segments' in the tiers the spot check
+    # sent patches to (TessSettings.inner_measure "detail"); each tier has the same patches in all three
+    by_measure = {m: tiers[f"tess-hybrid-{m}"] for m in ("extent", "segment")}
+    for k, tier in enumerate(tiers["tess-hybrid"]):
+        assert tier["patches"] == by_measure["extent"][k]["patches"] == by_measure["segment"][k]["patches"]
+        assert tier["triangles"] == by_measure["segment" if k else "extent"][k]["triangles"], (k, tiers)
     md = (tmp_path / "results.md").read_text()
     assert "## Hybrid anti-aliasing (issue #21)" in md and "| 0.6 | tess-hybrid" in md
     try:

@@ -283,11 +283,15 @@ def test_a_carried_tier_keeps_its_resolve(two_spheres, coarse, monkeypatch):
 
 
 def test_a_single_finest_tier_is_the_uniform_frame(two_spheres):
+    """A hybrid frame whose patches are all in tier 2 is the uniform frame of that tier's mode at its
+    thresholds, with the inner levels of a tier the spot check sends patches to (the longest
+    segment's: TessSettings.inner_measure "detail")."""
     scene, cam, rl, tess = two_spheres
     top, d2 = modes()[-1], divisors(msaa_lod=True)[2]   # the hybrid's tiers by default: the guideline's
     hyb = tess.draw(_with_tiers(rl, np.full(len(rl), 2)), None, scene, cam, TessSettings(aa="hybrid"),
                     threshold=(20.0, 20.0))
-    uniform = tess.draw(rl, None, scene, cam, TessSettings(aa=top.name), threshold=(20.0 / d2, 20.0 / d2))
+    uniform = tess.draw(rl, None, scene, cam, TessSettings(aa=top.name, inner_measure="segment"),
+                        threshold=(20.0 / d2, 20.0 / d2))
     assert hyb.stats["samples_per_pixel"] == uniform.stats["samples_per_pixel"]
     for name in ("color", "depth", "normal", "object_id"):
         np.testing.assert_array_equal(getattr(hyb, name), getattr(uniform, name), err_msg=name)

@@ -15,7 +15,8 @@ in tier 0), patches promoted by the spot check, triangles (tess) and the tess re
 per-tier record where it gives one; then FLIP (paramlod.app.bench.mesh_eval.flip) of the last timed
 frame against a reference frame of the same camera.
 
-The reference is tess 16xSS+8xMS (multisampling capped to the device's: the row says what ran).
+The reference is tess 16xSS+8xMS with inner levels from the longest LOD segment
+(REFERENCE_INNER_MEASURE; multisampling capped to the device's: the row says what ran).
 Where that fails or one frame takes longer than ``reference_budget_s``, the scene's reference is
 points 16xSS at twice the default sample density (REFERENCE_POINTS_DENSITY), for every distance of
 that scene; the result names the reference used and why. The reference is drawn twice per distance:
@@ -65,6 +66,9 @@ VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-pair": ("tess", "hyb
             "tess-hybrid-finest": ("tess", "hybrid"),
             "tess-4xSS+8xMS": ("tess", "4xSS+8xMS"),
             "points-hybrid": ("points", "hybrid"), "points-16xSS": ("points", "16xSS"),
+            # the points' tiers with quad coverage: their silhouettes are the sampled polygon's, not
+            # grown by a (sub)pixel (docs/points.md, "Quad coverage")
+            "points-hybrid-quad": ("points", "hybrid"),
             "points-noAA": ("points", "noAA"), "tess-noAA": ("tess", "noAA"),
             # uniform 4xSS: on llvmpipe and an H100 it came closer to 4xSS+8xMS's (16xSS's) FLIP at
             # under half the time than the hybrid with its tiers' uniform divisors did (docs/hybrid.md)
@@ -72,16 +76,21 @@ VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-pair": ("tess", "hyb
             # TessSettings.msaa_lod: the hybrid's tiers at the thresholds of their uniform modes (1, 2)
             # instead of the guideline's sqrt(8), sqrt(32); the uniform mode at the guideline's
             "tess-hybrid-ss-lod": ("tess", "hybrid"), "tess-4xSS+8xMS-msaa-lod": ("tess", "4xSS+8xMS"),
-            # inner levels from the longest LOD segment (TessSettings.inner_measure): thin lobes whole
-            "tess-hybrid-segment": ("tess", "hybrid")}
+            # inner levels (TessSettings.inner_measure) from the longest LOD segment in every tier
+            # (tier 0's too), or from the extents in every tier (the default until 2026-12-06)
+            "tess-hybrid-segment": ("tess", "hybrid"), "tess-hybrid-extent": ("tess", "hybrid")}
 # the hybrid variant and the uniform mode it is measured against
 PAIRS = {"tess": ("tess-hybrid", "tess-4xSS+8xMS"), "tess-pair": ("tess-hybrid-pair", "tess-4xSS+8xMS"),
          "tess-finest": ("tess-hybrid-finest", "tess-4xSS+8xMS"),
          "tess-guideline": ("tess-hybrid", "tess-4xSS+8xMS-msaa-lod"),   # both at the guideline's thresholds
          "tess-ss-lod": ("tess-hybrid-ss-lod", "tess-4xSS+8xMS"),
          "tess-segment": ("tess-hybrid-segment", "tess-4xSS+8xMS"),
-         "points": ("points-hybrid", "points-16xSS")}
+         "tess-extent": ("tess-hybrid-extent", "tess-4xSS+8xMS"),
+         "points": ("points-hybrid", "points-16xSS"), "points-quad": ("points-hybrid-quad", "points-16xSS")}
 REFERENCE_TESS = ("tess", "16xSS+8xMS")
+# the tess reference's inner levels: from the longest LOD segment, so that thin lobes are whole (the
+# extents cut 10-px order-8 glyphs' lobes short, silhouette IoU 0.64 against 0.91; docs/hybrid.md)
+REFERENCE_INNER_MEASURE = "segment"
 REFERENCE_POINTS = ("points", "16xSS")
 REFERENCE_POINTS_DENSITY = 3.0   # samples per pixel of a segment: twice PointSettings.density
 REFERENCES = ("auto", "tess", "points")
@@ -238,11 +247,14 @@ def references(scene, cams: dict, threshold, l_max, l_min, reference: str = "aut
         variant, aa = REFERENCE_TESS
         try:
             rs = settings(variant, aa, threshold, l_max, l_min)
+            rs.tess.inner_measure = REFERENCE_INNER_MEASURE
             images, per, why = _draw_twice(scene, cams, order, variant, rs, budget_s if reference == "auto" else None)
             if why is None:
                 ran = sorted({p["aa_effective"] for p in per})
                 return images, {"variant": variant, "aa": aa, "ran": ", ".join(ran), "per_distance": per,
-                                "label": f"tess {aa}" + (f" (ran {', '.join(ran)})" if ran != [aa] else "")}
+                                "inner_measure": REFERENCE_INNER_MEASURE,
+                                "label": f"tess {aa}, {REFERENCE_INNER_MEASURE} inner levels"
+                                         + (f" (ran {', '.join(ran)})" if ran != [aa] else "")}
         except Exception as exc:   # any failure of the reference (GL limits, memory, ...) means: the points one
             if reference == "tess":
                 raise

@@ -26,12 +26,15 @@ VARIANT_SETTINGS = {
     "tess-segment": {("tess", "inner_measure"): "segment"},                 # docs/tessellation.md, "Tessellation levels"
     "tess-detail": {("tess", "detail_levels"): True},                       # docs/hybrid.md, "Detail levels"
     # rows of the hybrid extra (paramlod.app.bench.hybrid): its tiers drawn with fewer carries, at
-    # the tiers' uniform divisors or with segment inner levels; the uniform mode at the guideline's
+    # the tiers' uniform divisors, with segment or extent inner levels in every tier; the uniform mode
+    # at the guideline's
     "tess-hybrid-pair": {("tess", "hybrid_targets"): "pair"},
     "tess-hybrid-finest": {("tess", "hybrid_targets"): "finest"},
     "tess-hybrid-ss-lod": {("tess", "msaa_lod"): False},
     "tess-hybrid-segment": {("tess", "inner_measure"): "segment"},
+    "tess-hybrid-extent": {("tess", "inner_measure"): "extent"},   # the thesis's levels in every tier
     "tess-4xSS+8xMS-msaa-lod": {("tess", "msaa_lod"): True},
+    "points-hybrid-quad": {("points", "coverage"): "quad"},   # the points' tiers with quad coverage
 }
 
 
