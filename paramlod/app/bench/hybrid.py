@@ -68,7 +68,7 @@ VARIANTS = {"tess-hybrid": ("tess", "hybrid"), "tess-hybrid-pair": ("tess", "hyb
             "points-hybrid": ("points", "hybrid"), "points-16xSS": ("points", "16xSS"),
             # the points' tiers with quad coverage: their silhouettes are the sampled polygon's, not
             # grown by a (sub)pixel (docs/points.md, "Quad coverage")
-            "points-hybrid-quad": ("points", "hybrid"),
+            "points-hybrid-quad": ("points", "hybrid"), "points-hybrid-quad-half": ("points", "hybrid"),
             "points-noAA": ("points", "noAA"), "tess-noAA": ("tess", "noAA"),
             # uniform 4xSS: on llvmpipe and an H100 it came closer to 4xSS+8xMS's (16xSS's) FLIP at
             # under half the time than the hybrid with its tiers' uniform divisors did (docs/hybrid.md)
