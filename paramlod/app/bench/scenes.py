@@ -35,6 +35,7 @@ VARIANT_SETTINGS = {
     "tess-hybrid-extent": {("tess", "inner_measure"): "extent"},   # the thesis's levels in every tier
     "tess-4xSS+8xMS-msaa-lod": {("tess", "msaa_lod"): True},
     "points-hybrid-quad": {("points", "coverage"): "quad"},   # the points' tiers with quad coverage
+    # ... and at half the density, as the points-quad row (quads are exact however far apart)
     "points-hybrid-quad-half": {("points", "coverage"): "quad", ("points", "density"): 0.75},
 }
 
