@@ -699,8 +699,11 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                 spot_n[k] = (float4)(spot_normal(func, P, I, c.x, c.y), 0.0f);
             }
             barrier(CLK_LOCAL_MEM_FENCE);
+            // a work-item stops once its own count decides the patch (the group's is at least its
+            // own): on a CPU, one work-item a patch, a patch full of detail is decided in a few
+            // sub-samples instead of 189; the decision, all the stage keeps of the count, is the same
             uint mine = 0u;
-            for (uint k = l; k < SPOT_SUBS; k += LOD_GROUP)
+            for (uint k = l; k < SPOT_SUBS && mine < spot_min; k += LOD_GROUP)
                 mine += spot_turns(func, P, I, patch.range, cu, cv, spot_n, k, spot_cos) ? 1u : 0u;
             if (mine) atomic_add(&spot_count, mine);
             barrier(CLK_LOCAL_MEM_FENCE);
