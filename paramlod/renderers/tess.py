@@ -193,7 +193,9 @@ class TessSettings:
 
     def inner_levels_for(self, detail: bool) -> str:
         """The inner measure ("extent" or "segment") of patches that the spot check sent on
-        (``detail``) or not."""
+        (``detail``) or not. A frame's draw lists pass the concrete measure on
+        (``TessRenderer._draw_list``); a list drawn or bounded outside a frame
+        (``vertex_bound``, the grid tessellator) is taken as not sent on."""
         if self.inner_measure == "detail":
             return "segment" if detail else "extent"
         return self.inner_measure
@@ -325,7 +327,7 @@ def vertex_bound(ext: np.ndarray, settings: TessSettings, threshold) -> np.ndarr
         lu = lv = outer = np.full(len(ext), float(settings.l_max))
     else:
         L = float(settings.base_level)
-        if settings.inner_measure == "segment":
+        if settings.inner_levels_for(False) == "segment":
             ext = np.maximum(ext[:, :2], ext[:, 2:4])
         lu, lv = (np.clip(np.nan_to_num(ext[:, a] * L / min(float(t), L), nan=settings.l_min),
                           settings.l_min, settings.l_max) for a, t in ((0, threshold[0]), (1, threshold[1])))

@@ -100,7 +100,7 @@ class GridTessellator:
             rule, kind = level_rule(settings, threshold)
             self._levels.set_args(patches.data, np.uint32(n), *d["inst"], d["cam"], cltypes.make_float4(*rule),
                                   cltypes.make_float2(float(settings.l_min), float(settings.l_max)),
-                                  np.uint32(kind), np.uint32(settings.inner_measure == "segment"), levels.data)
+                                  np.uint32(kind), np.uint32(settings.inner_levels_for(False) == "segment"), levels.data)
             launch(q, self._levels, (-(-n // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
             lv = levels.get().reshape(n, len(LEVELS))
         else:

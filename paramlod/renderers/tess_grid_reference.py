@@ -78,7 +78,7 @@ def grid_levels(records, scene, camera, settings, threshold) -> tuple[np.ndarray
                 raw[:, e] = _chord(bend, rule[0], lclamp)
         if kind == 1:
             ext = records["ext"].astype(np.float32)
-            if settings.inner_measure == "segment":
+            if settings.inner_levels_for(False) == "segment":
                 ext[:, :2] = np.maximum(ext[:, :2], ext[:, 2:])
             for k, t in ((0, rule[2]), (1, rule[3])):
                 with np.errstate(invalid="ignore"):
