@@ -341,7 +341,7 @@ class MeshDraw:
         set_uniform(prog, "u_view", gl_matrix(camera.view))
         set_uniform(prog, "u_proj", gl_matrix(camera.projection))
         self._bind(prog, light, int(h * eff.ss))
-        tg.begin(prog)
+        tg.begin(prog, background)
         n = len(sel)
         triangles = 0
         if n:

@@ -20,9 +20,10 @@ the count pass (kernels/tess/tess_count_fragment.glsl): an occlusion query of th
 that show something, the pixels written.
 
 noAA targets of one view (``GLTargets.direct``) have no draw targets of their own: the fragments
-write an output set, the image (location 4) included, and the background pass
-(kernels/tess/tess_background_fragment.glsl) fills the pixels nothing was drawn into and counts
-them, in place of the resolve.
+write an output set, the image (location 4) included. ``begin`` clears only its object ids and
+its image (to the background's code); its colour, depth and normal are blanked where the object
+id is 0 when they are read. In place of the resolve, the background pass
+(kernels/tess/tess_background_fragment.glsl) counts the pixels nothing was drawn into.
 
 Hybrid anti-aliasing (the tess renderer's ``aa = "hybrid"``): each tier draws into its own
 targets, coarse to fine; a finer tier's targets start from a per-sample copy of a coarser tier's
@@ -142,8 +143,8 @@ def count_program(ctx):
 
 
 def background_program(ctx):
-    """The background pass of targets drawn directly (kernels/tess/tess_background_fragment.glsl),
-    cached."""
+    """The background pass of targets drawn directly (kernels/tess/tess_background_fragment.glsl:
+    a full-screen triangle on the far plane that writes nothing), cached."""
     cache = gl_cache(ctx)
     prog = cache.get("gl_background_program")
     if prog is None:
@@ -174,6 +175,8 @@ def carry_vao(ctx, ratio: int, coarse_samples: int):
     return vao
 
 
+# what a set drawn into directly reads where nothing was drawn (its object id is 0)
+BLANK = {"color": 0.0, "depth": np.inf, "normal": 0.0}
 SRGB8_TABLE_BINDING = 5   # the storage buffer binding of the image's encoding table (common/targets.glsl)
 LENT_SETS = 3   # output sets that lent Frames may hold at once before the oldest is copied to the host
 # the resolve's counter buffer (tess_common.glsl PlCounters): NaN vertices, device samples
@@ -183,7 +186,12 @@ RESOLVE_COUNTERS_BYTES = 8
 class _OutputSet:
     """One set of single-sampled output targets at ``size``: colour RGBA32F, depth R32F, normal
     RGBA32F, object id R32UI and the 8-bit sRGB image RGBA8UI (attachments 0-4 of ``fbo``, with
-    the depth buffer ``zbuf`` where the set is drawn into directly)."""
+    the depth buffer ``zbuf`` where the set is drawn into directly).
+
+    A set drawn into directly is cleared by ``clear_direct``: its object ids and image only.
+    Clearing the two RGBA32F attachments too cost llvmpipe about as much as drawing a full screen
+    into them, so colour, depth and normal keep what an earlier frame left where nothing is drawn,
+    and ``read`` blanks them where the object id is 0 (no object; ids are 1-based)."""
 
     # name: (attribute, attachment, moderngl dtype, components read)
     ARRAYS = {"color": ("color", 0, "f4", 4), "depth": ("depth", 1, "f4", 1), "normal": ("normal", 2, "f4", 3),
@@ -198,9 +206,33 @@ class _OutputSet:
         self.image = ctx.texture(size, 4, dtype="u1")
         self.fbo = ctx.framebuffer([self.color, self.depth, self.normal, self.object, self.image], zbuf)
         self.background = (0.0, 0.0, 0.0)   # what the last resolve's image is composited over
+        self.direct = zbuf is not None
+        self._empty = None   # drawn directly: where the object id is 0, once read
+
+    def clear_direct(self, background):
+        """Bind this set (drawn into directly) and clear it for a frame over ``background``
+        (linear RGB): the depth buffer to 1, the object ids to 0, the image to the background's code."""
+        self.fbo.use()
+        self.fbo.color_mask = ((False,) * 4,) * 5
+        self.fbo.clear(depth=1.0)
+        self.fbo.color_mask = ((True,) * 4,) * 5
+        self.background = tuple(float(x) for x in background)
+        code = (ctypes.c_uint * 4)(*(int(c) for c in linear_to_srgb8(np.float32(self.background))), 255)
+        gl = raw_gl()   # moderngl clears integer attachments with floats, which GL leaves undefined
+        gl.glClearNamedFramebufferuiv(self.fbo.glo, GL_COLOR, 3, (ctypes.c_uint * 4)())
+        gl.glClearNamedFramebufferuiv(self.fbo.glo, GL_COLOR, 4, code)
+        self._empty = None
 
     def read(self, name: str) -> np.ndarray:
         """The array ``name`` (a Frame array or "image"), contiguous, row 0 at the top."""
+        a = self._read(name)
+        if self.direct and name in BLANK:
+            if self._empty is None:
+                self._empty = self._read("object_id") == 0
+            a[self._empty] = BLANK[name]
+        return a
+
+    def _read(self, name: str) -> np.ndarray:
         attr, attachment, dtype, keep = self.ARRAYS[name]
         if getattr(self, attr, None) is None:
             raise ParamlodError(f"this frame's {name} is gone: its OpenGL targets were released before it was read")
@@ -212,7 +244,7 @@ class _OutputSet:
         # where numpy's slice of RGBA took 1.8); then rows are flipped whole
         data = self.fbo.read(components=keep, dtype=dtype, attachment=attachment)
         a = np.frombuffer(data, np.dtype(dtype)).reshape((h, w, keep) if keep > 1 else (h, w))
-        return np.ascontiguousarray(a[::-1])
+        return a[::-1].copy()   # writable, for the blanking in ``read``
 
     def release(self):
         _release_attributes(self, ("fbo", "color", "depth", "normal", "object", "image"))
@@ -376,6 +408,7 @@ class GLTargets(_Outputs):
         if self.direct:
             try:
                 self.zbuf = ctx.depth_renderbuffer(big)
+                self.background_fbo = ctx.framebuffer(depth_attachment=self.zbuf)   # for the background pass
                 self.background_query = ctx.query(samples=True)
                 self._outputs(background_program(ctx), self.zbuf)
             except Exception as exc:
@@ -410,19 +443,15 @@ class GLTargets(_Outputs):
         except Exception as exc:
             self._failed(exc, f"{what} render targets ({w}x{h}, {ss}x{ss} SS, {samples} samples)")
 
-    def begin(self, program=None):
+    def begin(self, program=None, background=(0.0, 0.0, 0.0)):
         """Bind the targets for drawing and clear them (colour and depth only; see CLEAR_MASK;
-        targets drawn directly: an output set no Frame holds, its depth buffer only, the
-        background pass fills the rest). ``program``, the draw program, is told whether to
-        write the image (its ``u_image``): direct targets need it."""
+        targets drawn directly: an output set no Frame holds, ``_OutputSet.clear_direct``, its
+        image to ``background``, which ``resolve`` must be given too). ``program``, the draw
+        program, is told whether to write the image (its ``u_image``): direct targets need it."""
         if self.direct:
             if program is None:
                 raise ValueError("targets drawn directly need the draw program, which writes their image")
-            fbo = self._next_set().fbo
-            fbo.use()
-            fbo.color_mask = ((False,) * 4,) * 5
-            fbo.clear(depth=1.0)
-            fbo.color_mask = ((True,) * 4,) * 5
+            self._next_set().clear_direct(background)
             bind_srgb8_buckets(self.ctx)
             set_uniform(program, "u_image", 1)
             return
@@ -464,7 +493,7 @@ class GLTargets(_Outputs):
         4 for a 2xMS request) and sets ``pixels_written``."""
         ctx = self.ctx
         if self.direct:
-            return self._fill_background(background)
+            return self._count_background(background)
         if self.samples > 1:
             ctx.copy_framebuffer(self.color_resolved_fbo, self.color_ms_fbo)
         ctx.disable(moderngl.DEPTH_TEST)
@@ -479,26 +508,30 @@ class GLTargets(_Outputs):
         ctx.finish()
         return self._read_counters()
 
-    def _fill_background(self, background) -> int:
-        """``resolve`` of targets drawn directly: the background pass (its occlusion query counts
-        the pixels nothing was drawn into) over the current output set."""
+    def _count_background(self, background) -> int:
+        """``resolve`` of targets drawn directly: the background pass, whose occlusion query
+        counts the pixels nothing was drawn into (the image has the background since ``begin``)."""
         ctx, out = self.ctx, self.out
-        out.background = tuple(float(x) for x in background)
-        prog = self.resolve_vao.program
-        set_uniform(prog, "u_background_code", tuple(int(c) for c in linear_to_srgb8(np.float32(out.background))))
+        if tuple(float(x) for x in background) != out.background:
+            raise ValueError(f"targets drawn directly were begun over the background {out.background}, "
+                             f"not {tuple(background)}")
+        self.background_fbo.use()   # the depth buffer alone: the pass writes nothing
+        self.background_fbo.depth_mask = False
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         ctx.depth_func = "<="   # the far plane passes where the cleared depth (1) is left
         with self.background_query:
             self.resolve_vao.render(mode=moderngl.TRIANGLES, vertices=3)
         ctx.depth_func = "<"
+        self.background_fbo.depth_mask = True
+        out.fbo.use()
         w, h = self.size
         self.pixels_written = w * h - int(self.background_query.samples)   # waits for the pass
         return 1
 
     def release(self):
         self._release("fbo", "color_ms_fbo", "color_resolved_fbo", "color", "depth", "normal", "object", "zbuf",
-                      "background_query")
+                      "background_fbo", "background_query")
 
 
 # --- layered targets (multi-view frames) --------------------------------------------------------
@@ -528,6 +561,7 @@ _SIGNATURES = {
     "glNamedFramebufferDrawBuffers": (None, [_U, _I, _UP]),
     "glCheckNamedFramebufferStatus": (_U, [_U, _U]),
     "glClearNamedFramebufferfv": (None, [_U, _U, _I, _FP]),
+    "glClearNamedFramebufferuiv": (None, [_U, _U, _I, _UP]),
     "glBlitNamedFramebuffer": (None, [_U, _U] + [_I] * 8 + [_U, _U]),
     "glBindFramebuffer": (None, [_U, _U]),
     "glViewport": (None, [_I] * 4),
@@ -541,7 +575,8 @@ _gl_lib = None
 
 def raw_gl():
     """The GL 4.5 entry points moderngl lacks (texture arrays with multisamples, layered
-    framebuffers), called on the current context (gl_context's) through the GL library."""
+    framebuffers, clearing an integer attachment), called on the current context (gl_context's)
+    through the GL library."""
     global _gl_lib
     if _gl_lib is None:
         for name in ("libOpenGL.so.0", "libGL.so.1"):
@@ -551,7 +586,7 @@ def raw_gl():
             except OSError:
                 continue
         else:
-            raise DeviceError("multi-view OpenGL rendering needs libOpenGL.so.0 or libGL.so.1 (Debian: libopengl0)")
+            raise DeviceError("paramlod's OpenGL renderers need libOpenGL.so.0 or libGL.so.1 (Debian: libopengl0)")
         for fn, (res, args) in _SIGNATURES.items():
             f = getattr(lib, fn)
             f.restype, f.argtypes = res, args

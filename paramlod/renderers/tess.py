@@ -643,7 +643,7 @@ class TessRenderer:
         set_uniform(prog, "u_near", float(camera.near))
         self._set_uniforms(prog, settings, (w, h), (tu, tv))
 
-        tg.begin(prog)
+        tg.begin(prog, scene.background)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         queries, draw_calls, start = [], 0, 0
@@ -721,7 +721,7 @@ class TessRenderer:
         for k in drawn:
             tg = targets[k]
             if coarse is None:
-                tg.begin(prog)
+                tg.begin(prog, scene.background)
             elif tg is not coarse:
                 ta = time.perf_counter()
                 tg.carry(coarse)

@@ -129,9 +129,10 @@ def test_a_frame_outlives_its_targets():
 
 
 def test_a_set_drawn_into_again_keeps_nothing_of_its_last_frame():
-    """noAA frames are drawn straight into an output set (GLTargets.direct), whose background pass
-    fills what no fragment wrote: after a near frame is dropped, a far frame drawn into its set
-    equals one drawn into a fresh set, and its bare pixels hold the background only."""
+    """noAA frames are drawn straight into an output set (GLTargets.direct), which is cleared
+    only in its object ids and image; its colour, depth and normal are blanked where no object
+    was drawn when read: after a near frame is dropped, a far frame drawn into its set equals one
+    drawn into a fresh set, and its bare pixels hold the background only."""
     scene = _scene()
     near = pl.Camera.look_at((0, 1, 2.2), (0, 0, 0), size=(48, 40))
     far = pl.Camera.look_at((0, 2, 6), (0, 0, 0), size=(48, 40))
