@@ -151,3 +151,28 @@ def test_a_set_drawn_into_again_keeps_nothing_of_its_last_frame():
     assert bare.sum() > 1000 and again.stats["pixels_written"] == (~bare).sum()
     assert not again.color[bare].any() and not again.normal[bare].any() and not again.object_id[bare].any()
     assert np.all(again.rgb8()[bare] == linear_to_srgb8(np.float32(scene.background)))
+
+
+def test_targets_drawn_directly_take_their_background_when_begun():
+    """Direct targets clear their image to the background at ``begin``: a frame with nothing drawn
+    is that background with +inf depth, and a resolve asked for another background is refused
+    rather than returning the wrong image."""
+    from paramlod.device.context import gl_context
+    from paramlod.renderers.tess import build_programs
+
+    ctx = gl_context()
+    tg = gl_targets.targets_for(None, ctx, (24, 16), 1, 1, "test")
+    prog = build_programs(ctx, [], "fractional_odd", grid=True)
+    try:
+        assert tg.direct
+        tg.begin(prog, (0.2, 0.3, 0.4))
+        with pytest.raises(ValueError, match="background"):
+            tg.resolve((0.0, 0.0, 0.0))
+        tg.begin(prog, (0.2, 0.3, 0.4))
+        tg.resolve((0.2, 0.3, 0.4))
+        frame = tg.frame()
+        assert tg.pixels_written == 0
+        assert np.all(frame.rgb8() == linear_to_srgb8(np.float32([0.2, 0.3, 0.4])))
+        assert np.all(np.isinf(frame.depth)) and not frame.color.any() and not frame.object_id.any()
+    finally:
+        tg.release()
