@@ -207,7 +207,8 @@ class _OutputSet:
         self.fbo = ctx.framebuffer([self.color, self.depth, self.normal, self.object, self.image], zbuf)
         self.background = (0.0, 0.0, 0.0)   # what the last resolve's image is composited over
         self.direct = zbuf is not None
-        self._empty = None   # drawn directly: where the object id is 0, once read
+        # drawn directly: where the object id is 0, and the ids read to find it until they are asked for
+        self._empty = self._ids = None
 
     def clear_direct(self, background):
         """Bind this set (drawn into directly) and clear it for a frame over ``background``
@@ -221,14 +222,20 @@ class _OutputSet:
         gl = raw_gl()   # moderngl clears integer attachments with floats, which GL leaves undefined
         gl.glClearNamedFramebufferuiv(self.fbo.glo, GL_COLOR, 3, (ctypes.c_uint * 4)())
         gl.glClearNamedFramebufferuiv(self.fbo.glo, GL_COLOR, 4, code)
-        self._empty = None
+        self._empty = self._ids = None
 
     def read(self, name: str) -> np.ndarray:
         """The array ``name`` (a Frame array or "image"), contiguous, row 0 at the top."""
+        if name == "object_id" and self._ids is not None:   # read once: a Frame asks for each array once
+            a, self._ids = self._ids, None
+            return a
         a = self._read(name)
-        if self.direct and name in BLANK:
+        if self.direct and name == "object_id":
+            self._empty = a == 0
+        elif self.direct and name in BLANK:
             if self._empty is None:
-                self._empty = self._read("object_id") == 0
+                self._ids = self._read("object_id")
+                self._empty = self._ids == 0
             a[self._empty] = BLANK[name]
         return a
 

@@ -8,7 +8,9 @@ import pytest
 
 import paramlod as pl
 from paramlod.core.color import SRGB8_BUCKETS, linear_to_srgb8, linear_to_srgb8_buckets, linear_to_srgb8_thresholds
+from paramlod.device.context import gl_context
 from paramlod.renderers import gl_targets
+from paramlod.renderers.tess import build_programs
 
 
 def _scene():
@@ -157,9 +159,6 @@ def test_targets_drawn_directly_take_their_background_when_begun():
     """Direct targets clear their image to the background at ``begin``: a frame with nothing drawn
     is that background with +inf depth, and a resolve asked for another background is refused
     rather than returning the wrong image."""
-    from paramlod.device.context import gl_context
-    from paramlod.renderers.tess import build_programs
-
     ctx = gl_context()
     tg = gl_targets.targets_for(None, ctx, (24, 16), 1, 1, "test")
     prog = build_programs(ctx, [], "fractional_odd", grid=True)
