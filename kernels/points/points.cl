@@ -80,12 +80,26 @@ inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
 }
 
 // A patch's two grid directions, as point_grid samples them and patch_chunks counts them.
-inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, float factor, uint measure,
-                       uint max_side, GridAxis* gu, GridAxis* gv) {
+// Thin tubes (`curve` > 0: PointSettings.curve_factor, pixel coverage): a patch that wraps around
+// an axis whose loop measures at most 2 target pixels (at most one across) covers no pixel whole,
+// so the hole-free spacing of `factor` buys nothing around it: at most 2 lines around (opposite
+// sides, the nearer wins each pixel). A loop of at least 1 pixel (a tube at least half a pixel
+// across) is also sampled along at `curve`, at most a pixel apart, so the pixels it lands in stay
+// 8-connected as a rasterized line's; thinner tubes share pixels with their neighbours, and the
+// denser samples decide which is in front (docs/points.md, "Thin tubes"). v is tested first.
+inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, float factor, float curve,
+                       uint measure, uint max_side, GridAxis* gu, GridAxis* gv) {
     float2 m = patch_measure(rp, measure);
     uint2 wraps = patch_wraps(rp, I, flags);
-    *gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, factor, max_side);
-    *gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, factor, max_side);
+    float2 loop = m * curve;   // target pixels around
+    uint thin_v = curve > 0.0f && wraps.y && loop.y <= 2.0f;
+    uint thin_u = curve > 0.0f && !thin_v && wraps.x && loop.x <= 2.0f;
+    float along = pl_fminf(factor, curve);
+    float fu = thin_v && loop.y >= 1.0f ? along : factor, fv = thin_u && loop.x >= 1.0f ? along : factor;
+    *gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, fu, max_side);
+    *gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, fv, max_side);
+    if (thin_u) { gu->n = min(gu->n, 3u); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
+    if (thin_v) { gv->n = min(gv->n, 3u); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
 }
 
 // The sampling grid of one patch: nu x nv samples spanning the range widened by `widen` per
@@ -100,11 +114,11 @@ typedef struct {
     uint capped;            // a direction has max_side samples
 } PointGrid;
 
-inline PointGrid point_grid(RenderPatch rp, __global const float* I, uint flags, float factor, uint measure,
-                            float widen, uint max_side) {
+inline PointGrid point_grid(RenderPatch rp, __global const float* I, uint flags, float factor, float curve,
+                            uint measure, float widen, uint max_side) {
     PointGrid g;
     GridAxis gu, gv;
-    patch_axes(rp, I, flags, factor, measure, max_side, &gu, &gv);
+    patch_axes(rp, I, flags, factor, curve, measure, max_side, &gu, &gv);
     g.nu = gu.n - gu.wrap; g.nv = gv.n - gv.wrap; g.nau = gu.na; g.nav = gv.na;
     g.nu_grid = gu.n; g.nv_grid = gv.n;
     g.capped = gu.n == max_side || gv.n == max_side;
@@ -591,9 +605,9 @@ inline uint cover_quad(QuadVertex q00, QuadVertex q10, QuadVertex q01, QuadVerte
 }
 
 inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
-                         uint measure, uint max_side) {
+                         float curve, uint measure, uint max_side) {
     GridAxis gu, gv;
-    patch_axes(rp, I, flags, factor, measure, max_side, &gu, &gv);
+    patch_axes(rp, I, flags, factor, curve, measure, max_side, &gu, &gv);
 #if PL_QUADS
     QuadRuns q = quad_runs(split, gu.n, gv.n);
     return (q.blocks * q.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
@@ -610,7 +624,7 @@ inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, ui
 #define ALL_TIERS 0xFFFFFFFFu
 __kernel void points_schedule(__global const RenderPatch* patches, __global const uint* count,
                               uint count_at, uint capacity, __global const float* inst_f,
-                              __global const uint* inst_u, float factor,
+                              __global const uint* inst_u, float factor, float curve,
                               uint measure, uint max_side, uint tier, __global ulong* order,
                               __global ulong* counters)
 {
@@ -620,7 +634,7 @@ __kernel void points_schedule(__global const RenderPatch* patches, __global cons
         if (tier != ALL_TIERS && ((rp.flags >> TIER_SHIFT) & 3u) != tier) continue;
         __global const uint* U = inst_u + rp.inst * INST_U;
         ulong k = patch_chunks(rp, inst_f + rp.inst * INST_F, U[INST_FLAGS], pl_split(U[INST_FUNC]), factor,
-                               measure, max_side);
+                               curve, measure, max_side);
         ulong old = atom_add(&counters[SCHED_AT], (1ul << CHUNK_BITS) | k);
         order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
     }
@@ -646,7 +660,7 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                    __global const float* params, __global const float4* materials,
                    __global const float* cam, __global const ulong* view_masks,
                    __global const float* light,
-                   float factor, uint measure, float widen, uint max_side, uint color_by,
+                   float factor, float curve, uint measure, float widen, uint max_side, uint color_by,
                    __global ulong* color_buf, __global ulong* aux_buf,
                    __global ulong* counters   // samples, atomics, NaN samples, capped patches, schedule
 #ifdef PL_RECORD
@@ -680,7 +694,7 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
             __global const float* P = params + inst_u[inst * INST_U + INST_PARAMS];
             uint object_id = inst_u[inst * INST_U + INST_OBJECT];
             float4 mat = debug_material(materials[inst], rp, color_by);
-            PointGrid g = point_grid(rp, I, inst_u[inst * INST_U + INST_FLAGS], factor, measure, widen, max_side);
+            PointGrid g = point_grid(rp, I, inst_u[inst * INST_U + INST_FLAGS], factor, curve, measure, widen, max_side);
 #if PL_VIEWS   // the views that see the patch (the LOD stage's render_views): the others are skipped
             ulong seen = view_masks[pid];
 #endif

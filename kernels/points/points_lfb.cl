@@ -144,7 +144,7 @@ void points_lfb(__global const RenderPatch* patches, __global const int4* rects,
             uint pid = pairs[off + c0 + i];
             RenderPatch rp = patches[pid];
             PointGrid g = point_grid(rp, inst_f + rp.inst * INST_F, inst_u[rp.inst * INST_U + INST_FLAGS], factor,
-                                     measure, widen, max_side);
+                                     0.0f, measure, widen, max_side);   // no thin-tube curves (direct variant only)
             int4 r = rects[pid];
             cg[i] = g; cpid[i] = pid; cinst[i] = rp.inst;
             cfirst[i] = (r.x == tx && r.y == ty) ? 1u : 0u;  // per-patch statistics counted once

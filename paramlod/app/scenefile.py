@@ -34,7 +34,7 @@ from paramlod.surfels.render import FixedCount, FixedSize
 TOP_KEYS = {"camera", "render", "objects", "meta", "animation", "camera_path"}   # camera_path: docs/scale-out.md
 CAMERA_KEYS = {"eye", "target", "up", "fov_y", "size", "near", "far", "direction", "margin"}
 RENDER_KEYS = {"variant", "background", "threshold", "max_steps", "initial_grid", "density", "max_patches", "patch_budget",
-               "detail_angle", "spot_angle", "spot_share", "color_by", "coverage",
+               "detail_angle", "spot_angle", "spot_share", "color_by", "coverage", "thin_tubes",
                "aa", "levels", "l_min", "l_max", "spacing", "msaa_lod", "chord_px", "tessellator", "inner_measure",
                "mesh_threshold", "mesh_color_by"}
 OBJECT_KEYS = {"function", "params", "color", "specular", "two_sided", "translate", "rotate", "scale", "matrix", "variant",
@@ -190,6 +190,7 @@ def load_scene(path, size=None) -> SceneFile:
     settings.tess = _tess_settings(r, ck)
     settings.mesh.threshold_px = ck.num(r, "mesh_threshold", "render", "render", default=settings.mesh.threshold_px,
                                         lo=0, hi=1e6)
+    settings.points.thin_tubes = ck.flag(r, "thin_tubes", "render", "render", default=PointSettings.thin_tubes)
     for key in ("color_by", "coverage"):   # the point variant's debug colouring, its pixel coverage
         if key in r:
             setattr(settings.points, key, r[key])

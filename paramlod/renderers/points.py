@@ -145,7 +145,8 @@ class DirectPointRenderer:
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
         else:   # only the schedule's counter
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * len(COUNTERS), 8)
-        sampling = (settings.factor(scale), settings.measure(boundary=True))   # watertight on patch edges
+        sampling = (settings.factor(scale), settings.curve_factor(scale),
+                    settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, self._order,
                 *inst, materials_buf, cam_buf, view_masks, light_buf, *sampling, np.float32(settings.widen),
                 np.uint32(settings.max_side), np.uint32(COLOR_BY.index(settings.color_by)), keys.color, keys.aux,

@@ -63,6 +63,11 @@ class PointSettings:
     # quads between neighbouring samples hold (a mesh of the sample grid, rasterized: silhouettes
     # as its polygon's; docs/points.md, "Quad coverage")
     coverage: str = "pixel"
+    # the direct variant with pixel coverage: a patch around which the surface closes (a periodic
+    # axis spanned whole) in a loop at most a pixel across is drawn as a curve: at most 2 lines
+    # around, and samples at most a pixel apart along it where it is at least half a pixel across
+    # (points.cl patch_axes; docs/points.md, "Thin tubes"). False: sampled as any surface
+    thin_tubes: bool = True
 
     def validate(self):
         if not 0.1 <= self.density <= 16:
@@ -86,6 +91,8 @@ class PointSettings:
             raise SceneError(f"points occlusion must be true, false or \"auto\", got {self.occlusion!r}")
         if self.coverage not in COVERAGE:
             raise SceneError(f"points coverage must be one of {', '.join(COVERAGE)}, got {self.coverage!r}")
+        if not isinstance(self.thin_tubes, (bool, np.bool_)):
+            raise SceneError(f"points thin_tubes must be true or false, got {self.thin_tubes!r}")
         if self.color_by not in COLOR_BY:
             raise SceneError(f"points color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
 
@@ -93,6 +100,14 @@ class PointSettings:
         """Samples per measured pixel along each side, as the kernel receives it (float32);
         ``scale``: target pixels per measured pixel (a hybrid tier's supersampling)."""
         return np.float32(self.density * self.oversample * scale / (1.0 - self.epsilon))
+
+    def curve_factor(self, scale: float = 1.0) -> np.float32:
+        """The kernels' ``curve``: samples per measured pixel along a thin tube (``factor`` without
+        ``density``: a pixel apart at most), 0 where thin tubes are off (``thin_tubes`` False, or a
+        coverage other than "pixel", whose cells would lose the tube's width)."""
+        if not self.thin_tubes or self.coverage != "pixel":
+            return np.float32(0)
+        return np.float32(self.oversample * scale / (1.0 - self.epsilon))
 
     @property
     def use_extent(self) -> bool:
@@ -106,9 +121,11 @@ class PointSettings:
         return np.uint32(MEASURE_BOUNDARY if boundary else MEASURE_SEGMENT)
 
 
-def side_counts(ext: np.ndarray, settings: PointSettings) -> np.ndarray:
-    """numpy twin of side_count() in points.cl: samples per side for each measure in ``ext``."""
-    n = np.ceil(np.asarray(ext).astype(np.float32) * settings.factor()) + np.float32(1)
+def side_counts(ext: np.ndarray, settings: PointSettings, factor=None) -> np.ndarray:
+    """numpy twin of side_count() in points.cl: samples per side for each measure in ``ext``
+    (``factor``: float32 scalar or per-measure array; default ``settings.factor()``)."""
+    factor = settings.factor() if factor is None else np.asarray(factor, np.float32)
+    n = np.ceil(np.asarray(ext).astype(np.float32) * factor) + np.float32(1)
     with np.errstate(invalid="ignore"):
         capped = ~(n < np.float32(settings.max_side))
     return np.where(capped, settings.max_side, np.maximum(np.nan_to_num(n), 2)).astype(np.int64)
@@ -122,18 +139,19 @@ def patch_measures(render_list: np.ndarray, measure) -> np.ndarray:
     return ext[:, 0:2] if int(measure) == MEASURE_EXTENT else ext[:, 2:4]
 
 
-def grid_axes(s: np.ndarray, w: np.ndarray, boundary: bool, settings: PointSettings):
+def grid_axes(s: np.ndarray, w: np.ndarray, boundary: bool, settings: PointSettings, factor=None):
     """Twin of grid_axis() in points.cl: (n, na, nm) int64 arrays for one grid direction, from the
     interior measure ``s`` and the sizing measure ``w``. na = 0: uniform, n samples; else boundary
-    strips of na steps at each end (the outer sevenths, stepped for w) and nm middle steps (for s)."""
+    strips of na steps at each end (the outer sevenths, stepped for w) and nm middle steps (for s).
+    ``factor``: samples per measured pixel (scalar or per patch; default ``settings.factor()``)."""
     f32 = np.float32
     s, w = np.asarray(s, f32), np.asarray(w, f32)
-    n = side_counts(w, settings)
+    factor = settings.factor() if factor is None else np.asarray(factor, f32)
+    n = side_counts(w, settings, factor)
     na = np.zeros(n.shape, np.int64)
     nm = np.zeros(n.shape, np.int64)
     if not boundary:
         return n, na, nm
-    factor = settings.factor()
     with np.errstate(invalid="ignore", over="ignore"):
         fa = (w * factor).astype(f32)
         fa = (fa * f32(1.0 / 7.0)).astype(f32)
@@ -167,15 +185,28 @@ def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool
     """(nu, nv) samples drawn per render patch, from the measure ``settings.sampling`` selects: as
     the direct variant samples (``boundary``: segment patches with boundary strips, grid_axes) or
     as the local-framebuffer variant (``boundary=False``). ``wraps``: ``patch_wraps`` of the list
-    (None: no patch wraps), whose uniform grids draw one line fewer."""
+    (None: no patch wraps), whose uniform grids draw one line fewer; the direct variant draws the
+    thin tubes among them as curves (``PointSettings.thin_tubes``, points.cl patch_axes)."""
     code = settings.measure(boundary)
     m = patch_measures(render_list, code)
     strips = int(code) == MEASURE_BOUNDARY
     ext = render_list["ext"]
+    factor, curve = settings.factor(), settings.curve_factor() if boundary else np.float32(0)
+    thin = np.zeros((len(render_list), 2), bool)   # patch_axes: the thin tubes' axis around
+    loop = np.zeros(m.shape, np.float32)            # target pixels around
+    if wraps is not None and curve > 0:
+        with np.errstate(invalid="ignore", over="ignore"):   # inf and NaN measures: no thin tubes
+            loop = (m * curve).astype(np.float32)
+        small = wraps & (loop <= np.float32(2))
+        thin[:, 1] = small[:, 1]
+        thin[:, 0] = small[:, 0] & ~small[:, 1]
     out = []
-    for k in range(2):
-        n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings)
-        out.append(n - (wraps[:, k] & (na == 0)) if wraps is not None else n)
+    for k in range(2):   # sampled along at `curve` where the loop around is 1 to 2 pixels
+        curve_along = thin[:, 1 - k] & (loop[:, 1 - k] >= np.float32(1))
+        along = np.where(curve_along, min(factor, curve), factor).astype(np.float32)
+        n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings, along)
+        n = np.where(thin[:, k], np.minimum(n, 3), n)
+        out.append(n - (wraps[:, k] & ((na == 0) | thin[:, k])) if wraps is not None else n)
     return out[0], out[1]
 
 

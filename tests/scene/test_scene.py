@@ -79,10 +79,10 @@ def test_scene_file_renders(tmp_path):
 def test_scene_file_hybrid_settings(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(SCENE.replace("threshold = 60", 'threshold = 60\naa = "hybrid"\nspot_angle = 30\nspot_share = 0.1\n'
-                                                 'color_by = "tier"\ncoverage = "centre"'))
+                                                 'color_by = "tier"\ncoverage = "centre"\nthin_tubes = false'))
     sf = load_scene(p)
     assert sf.settings.points.hybrid and sf.settings.tess.aa == "hybrid" and sf.settings.points.color_by == "tier"
-    assert sf.settings.points.coverage == "centre"
+    assert sf.settings.points.coverage == "centre" and sf.settings.points.thin_tubes is False
     assert (sf.settings.lod.spot_angle, sf.settings.lod.spot_share) == (30.0, 0.1)
     f = pl.render(sf.scene, sf.camera, settings=sf.settings)
     assert f.stats["tiers"] == [1, 4, 16] and f.coverage.sum() > 200
@@ -108,6 +108,7 @@ def test_scene_file_chord_levels_and_tessellator(tmp_path):
     (SCENE.replace("threshold = 60", 'threshold = 60\nlevels = "curvy"'), r'render.levels: must be "adaptive", "chord"'),
     (SCENE.replace("threshold = 60", 'threshold = 60\ncolor_by = "tiers"'), r"render.color_by: points color_by must"),
     (SCENE.replace("threshold = 60", 'threshold = 60\ncoverage = "center"'), r"render.coverage: points coverage must"),
+    (SCENE.replace("threshold = 60", 'threshold = 60\nthin_tubes = "yes"'), r"render.thin_tubes: must be true or false"),
     (SCENE.replace("threshold = 60", "threshold = 60\nspot_angle = 200"), r"render.spot_angle"),
     (SCENE.replace('function = "sphere"', 'function = "shpere"'), r"s.toml:10: objects\[0\].function: unknown function 'shpere'"),
     (SCENE + 'params = { radius = "big" }\n', r"s.toml:12: objects\[0\].params"),

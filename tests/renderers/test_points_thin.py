@@ -1,0 +1,114 @@
+"""Thin tubes (``PointSettings.thin_tubes``): a patch whose surface closes around an axis in a loop
+of at most 2 target pixels is drawn by the direct variant as a curve (kernels/points/points.cl
+patch_axes; twin paramlod.renderers.sampling.grid_counts)."""
+import numpy as np
+import pytest
+from scipy import ndimage
+
+import paramlod as pl
+from paramlod.errors import SceneError
+from paramlod.lod.patches import RENDER_DTYPE
+from paramlod.renderers.points import grid_counts, patch_wraps
+
+from conftest import NOT_VISITED, record_direct_points
+from helpers.stages import ParametricStage
+
+CAM = pl.Camera.look_at((0.0, 0.4, 3.0), (0.0, 0.0, 0.0), size=(200, 140))
+# rings whose tubes are about 0.2, 0.4, 0.6 and 1.5 pixels across: loops under 1 pixel, of 1 to 2,
+# and one that is no thin tube
+MINOR = (0.0015, 0.003, 0.0045, 0.012)
+
+
+def _rings():
+    scene = pl.Scene()
+    for k, minor in enumerate(MINOR):
+        scene.add("torus", params={"major": 0.3, "minor": minor},
+                  transform=pl.translate(0.75 * k - 1.1, 0.1 * k - 0.15, 0.0) @ pl.rotate(25 + 20 * k, (1, 0.2, 0)),
+                  material=pl.Material(color=(0.9, 0.5 - 0.1 * k, 0.2 + 0.2 * k)))
+    return scene
+
+
+def _render_list(scene, rs):
+    stage = ParametricStage(scene)
+    dev = stage.upload(scene, CAM)
+    _, n, _, _ = stage.lod.run(dev["inst"], dev["domains"], dev["cam"], rs.lod)
+    rl = stage.lod.read_render_list(n)
+    return rl, patch_wraps(rl, dev["flags"], dev["domains"])
+
+
+def test_the_rings_have_loops_of_every_kind():
+    rl, wraps = _render_list(_rings(), pl.RenderSettings())
+    loop = rl["w"][:, 1][wraps[:, 1]]   # v, the way around the tube: all patches span it whole
+    assert wraps[:, 1].all()
+    assert (loop < 1).any() and ((loop >= 1) & (loop <= 2)).any() and (loop > 2).any()
+
+
+def test_the_kernel_samples_the_curves_the_twin_counts():
+    # every sample of the thin tubes' grids visited once, as many as the twin counts, and the keys
+    # np.minimum.at over them
+    stats, color, pix, key, total = record_direct_points(pl.PointSettings(), CAM.size, _rings(), CAM)
+    assert stats["samples"] == total and not (pix == NOT_VISITED).any()
+    kept = pix != 0xFFFFFFFF
+    expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
+    np.minimum.at(expect, pix[kept], key[kept])
+    np.testing.assert_array_equal(color, expect)
+    off = pl.PointSettings(thin_tubes=False)
+    rl, wraps = _render_list(_rings(), pl.RenderSettings())
+    nu, nv = grid_counts(rl, off, wraps=wraps)
+    assert total < int((nu * nv).sum())
+
+
+def test_thin_tubes_keep_their_pixels_with_fewer_samples():
+    rs_on, rs_off = pl.RenderSettings(), pl.RenderSettings()
+    rs_off.points.thin_tubes = False
+    on, off = (pl.render(_rings(), CAM, "points", rs) for rs in (rs_on, rs_off))
+    # the frames took the samples the twin counts, and the thin rings (not the last) 0.6 of them
+    rl, wraps = _render_list(_rings(), rs_on)
+    thin = rl["inst"] < len(MINOR) - 1
+    counts = []
+    for frame, rs in ((on, rs_on), (off, rs_off)):
+        nu, nv = grid_counts(rl, rs.points, wraps=wraps)
+        assert frame.stats["samples"] == int((nu * nv).sum())
+        counts.append(int((nu * nv)[thin].sum()))
+    assert counts[0] < 0.7 * counts[1]
+    # each ring drawn as a curve stays one 8-connected ring, covers no more pixels than drawn as a
+    # surface (the pixel rule's widening shrinks) and at least its true area (16xSS coverage)
+    rs_ref = pl.RenderSettings()
+    rs_ref.points.supersample = 4
+    ref = pl.render(_rings(), CAM, "points", rs_ref)
+    for k in range(len(MINOR)):
+        mine_on, mine_off = on.object_id == k + 1, off.object_id == k + 1
+        area = ref.color[..., 3][ref.object_id == k + 1].sum()
+        assert 40 < area <= mine_on.sum() <= mine_off.sum(), k
+        assert ndimage.label(mine_on, structure=np.ones((3, 3)))[1] == 1, k
+    # the ring that is no thin tube is drawn as before, bit for bit
+    wide = off.object_id == len(MINOR)
+    np.testing.assert_array_equal(on.rgb8()[wide], off.rgb8()[wide])
+
+
+def test_grid_counts_by_hand():
+    # one patch wrapping v, 40 px long along u; loops of 0.8, 1.5 and 2.5 px around
+    rl = np.zeros(3, RENDER_DTYPE)
+    rl["ext"][:, 2] = rl["w"][:, 0] = 40.0
+    rl["w"][:, 1] = rl["ext"][:, 3] = (0.8, 1.5, 2.5)
+    wraps = np.array([[False, True]] * 3)
+    on = pl.PointSettings()
+    nu, nv = grid_counts(rl, on, wraps=wraps)
+    # 0.8: 3 lines (ceil(1.2) + 1) less the wrap; along at density: ceil(40 * 1.5) + 1
+    # 1.5: 4 lines (ceil(2.25) + 1) capped at 3, less the wrap; along a pixel apart: 40 + 1
+    # 2.5: a surface, 5 lines less the wrap
+    assert nv.tolist() == [2, 2, 4] and nu.tolist() == [61, 41, 61]
+    off = grid_counts(rl, pl.PointSettings(thin_tubes=False), wraps=wraps)
+    assert [x.tolist() for x in off] == [[61, 61, 61], [2, 3, 4]]
+    # pixel-centre and quad coverage rasterize cells, which a 2-line tube would flatten: no curves
+    for coverage in ("centre", "quad"):
+        s = pl.PointSettings(coverage=coverage)
+        assert s.curve_factor() == 0
+        assert [x.tolist() for x in grid_counts(rl, s, wraps=wraps)] == [x.tolist() for x in off]
+    # a hybrid tier's target is `scale` times the measured pixels: the loop is measured in it
+    assert on.curve_factor(2) == 2 * on.curve_factor() == 2
+
+
+def test_thin_tubes_must_be_a_bool():
+    with pytest.raises(SceneError, match="thin_tubes must be true or false"):
+        pl.PointSettings(thin_tubes="yes").validate()
