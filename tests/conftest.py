@@ -86,6 +86,20 @@ def record_direct_points(settings, size, scene=None, cam=None):
     return stats, color.reshape(-1), pix.get(), key.get(), total
 
 
+def check_every_sample_once(stats, color, pix, key, total):
+    """The work-groups' shares of the samples (kernels/points.cl, points_schedule) cover every
+    sample of every patch once: none is left unvisited, the count matches, and the key buffer is
+    np.minimum.at over the recorded samples. Returns the colour keys."""
+    assert stats["samples"] == total
+    assert not (pix == NOT_VISITED).any()
+    kept = pix != 0xFFFFFFFF
+    assert kept.sum() > 1000
+    expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
+    np.minimum.at(expect, pix[kept], key[kept])
+    np.testing.assert_array_equal(color, expect)
+    return color
+
+
 # --- stored-reference images (tests/pipeline/test_reference_images.py) ---------------------------------
 
 import contextlib  # noqa: E402

@@ -20,27 +20,13 @@ from paramlod.scene.framing import framing_camera
 from paramlod.renderers.points import DirectPointRenderer, grid_counts, patch_wraps
 from paramlod.renderers.targets import KeyBuffer
 
-from conftest import NOT_VISITED, iou, record_direct_points, sphere_disc
+from conftest import check_every_sample_once, iou, record_direct_points, sphere_disc
 from helpers.stages import ParametricStage as renderer_for
 
 
 def test_key_buffer_equals_minimum_at_over_the_same_samples():
     # each sample covering the pixel it lands in (the recording hook records that pixel)
     check_every_sample_once(*record_direct_points(pl.PointSettings(coverage="pixel"), (96, 80)))
-
-
-def check_every_sample_once(stats, color, pix, key, total):
-    """The work-groups' shares of the samples (kernels/points.cl, points_schedule) cover every
-    sample of every patch once: none is left unvisited, the count matches, and the key buffer is
-    np.minimum.at over the recorded samples. Returns the colour keys."""
-    assert stats["samples"] == total
-    assert not (pix == NOT_VISITED).any()
-    kept = pix != 0xFFFFFFFF
-    assert kept.sum() > 1000
-    expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
-    np.minimum.at(expect, pix[kept], key[kept])
-    np.testing.assert_array_equal(color, expect)
-    return color
 
 
 def test_runs_of_split_functions_visit_every_sample_once(monkeypatch):

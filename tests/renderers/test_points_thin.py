@@ -10,7 +10,7 @@ from paramlod.errors import SceneError
 from paramlod.lod.patches import RENDER_DTYPE
 from paramlod.renderers.points import grid_counts, patch_wraps
 
-from conftest import NOT_VISITED, record_direct_points
+from conftest import check_every_sample_once, record_direct_points
 from helpers.stages import ParametricStage
 
 CAM = pl.Camera.look_at((0.0, 0.4, 3.0), (0.0, 0.0, 0.0), size=(200, 140))
@@ -46,12 +46,9 @@ def test_the_rings_have_loops_of_every_kind():
 def test_the_kernel_samples_the_curves_the_twin_counts():
     # every sample of the thin tubes' grids visited once, as many as the twin counts, and the keys
     # np.minimum.at over them
-    stats, color, pix, key, total = record_direct_points(pl.PointSettings(), CAM.size, _rings(), CAM)
-    assert stats["samples"] == total and not (pix == NOT_VISITED).any()
-    kept = pix != 0xFFFFFFFF
-    expect = np.full(color.size, np.iinfo(np.uint64).max, np.uint64)
-    np.minimum.at(expect, pix[kept], key[kept])
-    np.testing.assert_array_equal(color, expect)
+    recorded = record_direct_points(pl.PointSettings(), CAM.size, _rings(), CAM)
+    check_every_sample_once(*recorded)
+    total = recorded[-1]
     off = pl.PointSettings(thin_tubes=False)
     rl, wraps = _render_list(_rings(), pl.RenderSettings())
     nu, nv = grid_counts(rl, off, wraps=wraps)
