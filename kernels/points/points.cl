@@ -82,11 +82,10 @@ inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
 // A patch's two grid directions, as point_grid samples them and patch_chunks counts them.
 // Thin tubes (`curve` > 0: PointSettings.curve_factor, pixel coverage): a patch that wraps around
 // an axis whose loop measures at most 2 target pixels (at most one across) covers no pixel whole,
-// so the hole-free spacing of `factor` buys nothing around it: at most 2 lines around (opposite
-// sides, the nearer wins each pixel). A loop of at least 1 pixel (a tube at least half a pixel
-// across) is also sampled along at `curve`, at most a pixel apart, so the pixels it lands in stay
-// 8-connected as a rasterized line's; thinner tubes share pixels with their neighbours, and the
-// denser samples decide which is in front (docs/points.md, "Thin tubes"). v is tested first.
+// so the hole-free spacing of `factor` buys nothing around it: one line around. A loop of at
+// least 1 pixel (a tube at least half a pixel across) is also sampled along at `curve`, at most a
+// pixel apart, so the pixels it lands in stay 8-connected as a rasterized line's; thinner tubes
+// share pixels with their neighbours, and the denser samples decide which is in front (docs/points.md, "Thin tubes"). v is tested first.
 inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, float factor, float curve,
                        uint measure, uint max_side, GridAxis* gu, GridAxis* gv) {
     float2 m = patch_measure(rp, measure);
@@ -98,8 +97,10 @@ inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, floa
     float fu = thin_v && loop.y >= 1.0f ? along : factor, fv = thin_u && loop.x >= 1.0f ? along : factor;
     *gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, fu, max_side);
     *gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, fv, max_side);
-    if (thin_u) { gu->n = min(gu->n, 3u); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
-    if (thin_v) { gv->n = min(gv->n, 3u); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
+    // one line around (2 grid lines less the wrapped copy): a second on the far side, at most a
+    // pixel away, doubled the fibre curtain's samples and left its pixels and FLIP as they were
+    if (thin_u) { gu->n = min(gu->n, 2u); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
+    if (thin_v) { gv->n = min(gv->n, 2u); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
 }
 
 // The sampling grid of one patch: nu x nv samples spanning the range widened by `widen` per

@@ -64,8 +64,8 @@ class PointSettings:
     # as its polygon's; docs/points.md, "Quad coverage")
     coverage: str = "pixel"
     # the direct variant with pixel coverage: a patch around which the surface closes (a periodic
-    # axis spanned whole) in a loop at most a pixel across is drawn as a curve: at most 2 lines
-    # around, and samples at most a pixel apart along it where it is at least half a pixel across
+    # axis spanned whole) in a loop at most a pixel across is drawn as a curve: one line around,
+    # and samples at most a pixel apart along it where it is at least half a pixel across
     # (points.cl patch_axes; docs/points.md, "Thin tubes"). False: sampled as any surface
     thin_tubes: bool = True
 
@@ -205,7 +205,7 @@ def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool
         curve_along = thin[:, 1 - k] & (loop[:, 1 - k] >= np.float32(1))
         along = np.where(curve_along, min(factor, curve), factor).astype(np.float32)
         n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings, along)
-        n = np.where(thin[:, k], np.minimum(n, 3), n)
+        n = np.where(thin[:, k], np.minimum(n, 2), n)   # one line around (and its wrapped copy)
         out.append(n - (wraps[:, k] & ((na == 0) | thin[:, k])) if wraps is not None else n)
     return out[0], out[1]
 
