@@ -42,6 +42,11 @@ inline float2 patch_measure(RenderPatch rp, uint measure) {
     return rp.ext.zw;
 }
 
+// Quad coverage (PL_QUADS, PointSettings.coverage "quad"; below, "Quad coverage")
+#ifndef PL_QUADS
+#define PL_QUADS 0
+#endif
+
 // One direction of a grid. Uniform (na = 0): n samples, n - 1 equal steps. Boundary strips
 // (measure 2 where the boundary raised the measure, w > s): the outer seventh at each end, where the
 // LOD lines could not see the speed the edge has, is stepped for w (na steps each), the five
@@ -101,6 +106,12 @@ inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, floa
     // pixel away, doubled the fibre curtain's samples and left its pixels and FLIP as they were
     if (thin_u) { gu->n = min(gu->n, 2u); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
     if (thin_v) { gv->n = min(gv->n, 2u); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
+#if PL_QUADS
+    // quads around a tube need 3 lines around (4 grid lines with the wrapped copy): between 2 they
+    // are a flat ribbon that vanishes edge on, and one line and its copy make quads without area
+    if (gu->wrap) gu->n = max(gu->n, min(4u, max_side));
+    if (gv->wrap) gv->n = max(gv->n, min(4u, max_side));
+#endif
 }
 
 // The sampling grid of one patch: nu x nv samples spanning the range widened by `widen` per
@@ -559,9 +570,6 @@ inline Runs patch_runs(uint split, uint nu, uint nv) {
 // corner is evaluated once per block and run, not four times. All nu_grid x nv_grid samples are
 // corners (a wrapping axis's repeated line closes the seam). GPUs (PL_RUN 1): one quad a
 // work-item, its four corners evaluated.
-#ifndef PL_QUADS
-#define PL_QUADS 0
-#endif
 #define PL_QUAD_LINES (PL_RUN > 1u ? 4u : 1u)
 // CPUs: runs of 15 steps (16 corners down a line, two vectors), or 31 (four) down the lines of a
 // function's surface split, whose steps of one parameter a work-item evaluates once per line and

@@ -206,7 +206,13 @@ def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool
         along = np.where(curve_along, min(factor, curve), factor).astype(np.float32)
         n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings, along)
         n = np.where(thin[:, k], np.minimum(n, 2), n)   # one line around (and its wrapped copy)
-        out.append(n - (wraps[:, k] & ((na == 0) | thin[:, k])) if wraps is not None else n)
+        if wraps is None:
+            out.append(n)
+            continue
+        wrap = wraps[:, k] & ((na == 0) | thin[:, k])
+        if boundary and settings.coverage == "quad":   # 3 lines around a tube at least
+            n = np.where(wrap, np.maximum(n, min(4, settings.max_side)), n)
+        out.append(n - wrap)
     return out[0], out[1]
 
 

@@ -98,13 +98,29 @@ def test_grid_counts_by_hand():
     assert nv.tolist() == [1, 1, 4] and nu.tolist() == [61, 41, 61]
     off = grid_counts(rl, pl.PointSettings(thin_tubes=False), wraps=wraps)
     assert [x.tolist() for x in off] == [[61, 61, 61], [2, 3, 4]]
-    # pixel-centre and quad coverage rasterize cells, which a one-line tube would lack: no curves
-    for coverage in ("centre", "quad"):
-        s = pl.PointSettings(coverage=coverage)
-        assert s.curve_factor() == 0
-        assert [x.tolist() for x in grid_counts(rl, s, wraps=wraps)] == [x.tolist() for x in off]
+    # pixel-centre and quad coverage rasterize cells, which a one-line tube would lack: no curves;
+    # quads take 3 lines around a tube at least
+    centre, quad = pl.PointSettings(coverage="centre"), pl.PointSettings(coverage="quad")
+    assert centre.curve_factor() == quad.curve_factor() == 0
+    assert [x.tolist() for x in grid_counts(rl, centre, wraps=wraps)] == [x.tolist() for x in off]
+    assert [x.tolist() for x in grid_counts(rl, quad, wraps=wraps)] == [[61, 61, 61], [3, 3, 4]]
     # a hybrid tier's target is `scale` times the measured pixels: the loop is measured in it
     assert on.curve_factor(2) == 2 * on.curve_factor() == 2
+
+
+@pytest.mark.parametrize("density", [0.75, 1.5])
+def test_quads_draw_every_tube_with_3_lines_around(density):
+    # quad coverage keeps the surface grid, but a tube's grid of 1 or 2 lines around gave quads
+    # without area (a line and its wrapped copy) or a flat ribbon: the rings under a pixel across
+    # drew no pixel at all. With 3 lines around each ring is drawn
+    rs = pl.RenderSettings()
+    rs.points.coverage, rs.points.density = "quad", density
+    frame = pl.render(_rings(), CAM, "points", rs)
+    rl, wraps = _render_list(_rings(), rs)
+    _, nv = grid_counts(rl, rs.points, wraps=wraps)
+    assert wraps[:, 1].all() and nv.min() == 3
+    for k in range(len(MINOR)):
+        assert (frame.object_id == k + 1).sum() >= 8, k
 
 
 def test_thin_tubes_must_be_a_bool():
