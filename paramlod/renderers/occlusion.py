@@ -18,6 +18,7 @@ from paramlod.device.context import cl_device
 from paramlod.device.programs import launch
 
 GRID = 5        # positions per side of a patch's bound (occlusion.cl OCC_GRID)
+SPAN = 8        # texels per side a bound is tested against at most (occlusion.cl OCC_SPAN)
 BOUND_FLOATS = 8
 COUNTS = ("early", "deferred", "late")   # occlusion.cl counts[0..2]
 LOCAL = 64

@@ -6,7 +6,7 @@ import numpy as np
 
 from paramlod.core.layouts import CAMERA
 from paramlod.lod.reference import sampled_range, world_positions
-from paramlod.renderers.occlusion import GRID, pyramid_levels
+from paramlod.renderers.occlusion import GRID, SPAN, pyramid_levels
 
 F32 = np.float32
 
@@ -35,14 +35,17 @@ def occluded(bounds: np.ndarray, pyramid: list[np.ndarray], width: int, height: 
         y1 = np.clip(np.floor(b[:, 3]).astype(np.int64) + 1, 0, height - 1)
     out = np.zeros(len(b), bool)
     done = near == 0
+    steps = np.arange(SPAN)
     for level, tex in enumerate(pyramid):
         s = level + 1
         tx0, tx1, ty0, ty1 = x0 >> s, x1 >> s, y0 >> s, y1 >> s
-        here = ~done & (tx1 - tx0 <= 1) & (ty1 - ty0 <= 1)
-        m = np.maximum(np.maximum(tex[ty0[here], tx0[here]], tex[ty0[here], tx1[here]]),
-                       np.maximum(tex[ty1[here], tx0[here]], tex[ty1[here], tx1[here]]))
+        here = np.flatnonzero(~done & (tx1 - tx0 < SPAN) & (ty1 - ty0 < SPAN))
+        # the box's texels (at most SPAN x SPAN; indices past its edge repeat the last one)
+        tx = np.minimum(tx0[here, None] + steps, tx1[here, None])
+        ty = np.minimum(ty0[here, None] + steps, ty1[here, None])
+        m = tex[ty[:, :, None], tx[:, None, :]].max(axis=(1, 2)) if len(here) else np.zeros(0, np.uint32)
         out[here] = near[here] > m
-        done |= here
+        done[here] = True
     return out
 
 

@@ -119,6 +119,20 @@ def test_bounds_and_phase_decisions_equal_the_twin():
     assert occ["occluded"] > n // 5, "the wall hides most tori: phase 2 should cull many patches"
 
 
+def test_a_box_is_tested_against_texels_near_its_size():
+    # a wall at depth 1 over x < 40 of a 64 x 64 frame, background beyond. A box 13 px wide behind
+    # it, 3 px from its edge, is culled: at the level where at most 8 x 8 texels cover the box they
+    # lie on the wall (the 2 x 2 texels of 16 px that cover it would reach the background). A box
+    # whose margin reaches the edge is not.
+    w = h = 64
+    keys = np.full((h, w), np.iinfo(np.uint64).max, np.uint64)
+    keys[:, :40] = np.uint64(np.float32(1.0).view(np.uint32)) << np.uint64(32)
+    bounds = np.zeros((3, 8), np.float32)
+    bounds[:, :4] = [(24, 24, 36, 36), (24, 24, 39.2, 36), (24, 24, 36, 36)]
+    bounds[:, 4] = (2.0, 2.0, 0.5)   # nearest depths: behind, behind, in front of the wall
+    assert occluded(bounds, depth_pyramid(keys), w, h).tolist() == [True, False, False]
+
+
 @pytest.mark.parametrize("fname", ["sphere", "torus", "seashell3", "yarn", "sh_glyph", "giant_worm"])
 def test_bounds_hold_every_sample(fname):
     """Every position of a dense grid over a render patch's sampled range projects inside its
