@@ -6,7 +6,7 @@ import numpy as np
 
 from paramlod.core.layouts import CAMERA
 from paramlod.lod.reference import sampled_range, world_positions
-from paramlod.renderers.occlusion import GRID, SPAN, pyramid_levels
+from paramlod.renderers.occlusion import GRID, pyramid_levels
 
 F32 = np.float32
 
@@ -24,8 +24,9 @@ def depth_pyramid(color_keys: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def occluded(bounds: np.ndarray, pyramid: list[np.ndarray], width: int, height: int) -> np.ndarray:
-    """Twin of occluded(): bool per bound (float32 (n, 8): x0, y0, x1, y1, near)."""
+def occluded(bounds: np.ndarray, pyramid: list[np.ndarray], width: int, height: int, span: int) -> np.ndarray:
+    """Twin of occluded(): bool per bound (float32 (n, 8): x0, y0, x1, y1, near); ``span``: the
+    kernel's OCC_SPAN (occlusion.occlusion_span)."""
     b = np.asarray(bounds, F32)
     near = b[:, 4].view(np.uint32)
     with np.errstate(invalid="ignore"):
@@ -35,12 +36,12 @@ def occluded(bounds: np.ndarray, pyramid: list[np.ndarray], width: int, height: 
         y1 = np.clip(np.floor(b[:, 3]).astype(np.int64) + 1, 0, height - 1)
     out = np.zeros(len(b), bool)
     done = near == 0
-    steps = np.arange(SPAN)
+    steps = np.arange(span)
     for level, tex in enumerate(pyramid):
         s = level + 1
         tx0, tx1, ty0, ty1 = x0 >> s, x1 >> s, y0 >> s, y1 >> s
-        here = np.flatnonzero(~done & (tx1 - tx0 < SPAN) & (ty1 - ty0 < SPAN))
-        # the box's texels (at most SPAN x SPAN; indices past its edge repeat the last one)
+        here = np.flatnonzero(~done & (tx1 - tx0 < span) & (ty1 - ty0 < span))
+        # the box's texels (at most span x span; indices past its edge repeat the last one)
         tx = np.minimum(tx0[here, None] + steps, tx1[here, None])
         ty = np.minimum(ty0[here, None] + steps, ty1[here, None])
         m = tex[ty[:, :, None], tx[:, None, :]].max(axis=(1, 2)) if len(here) else np.zeros(0, np.uint32)

@@ -12,7 +12,7 @@ from paramlod.device.context import cl_device
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import POINT_TIERS, tier_divisors
-from paramlod.renderers.occlusion import OcclusionCuller
+from paramlod.renderers.occlusion import OcclusionCuller, occlusion_span
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, patch_wraps, side_counts  # noqa: F401  (re-exported)
 from paramlod.renderers.shading import LIGHT
@@ -79,6 +79,7 @@ class DirectPointRenderer:
         else:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
             defines[POLY_TRIG] = 1
         defines["PL_RUN"] = sample_run(cl_device().is_gpu)   # points.cl patch_runs
+        defines["OCC_SPAN"] = occlusion_span(cl_device().is_gpu)   # occlusion.cl occluded
         self._functions, self._defines = functions, defines
         # the program of one-view frames with pixel coverage, which occlusion.cl shares (the
         # function code is compiled once; OcclusionCuller takes its kernels whatever the frame's

@@ -13,7 +13,7 @@ from paramlod.core.layouts import camera_record
 from paramlod.device.context import cl_device
 from paramlod.lod.reference import sampled_range, world_positions
 from paramlod.pipeline.driver import scene_state
-from paramlod.renderers.occlusion import DepthPyramid, pyramid_levels
+from paramlod.renderers.occlusion import DepthPyramid, occlusion_span, pyramid_levels
 from paramlod.renderers.occlusion_reference import depth_pyramid, occluded, patch_bounds
 from paramlod.renderers.points import AUTO_MIN_SAVED, AUTO_PROBE, AutoOcclusion, DirectPointRenderer
 from paramlod.renderers.targets import KeyBuffer
@@ -110,27 +110,29 @@ def test_bounds_and_phase_decisions_equal_the_twin():
     deferred = np.empty(occ["deferred"], np.uint32)
     if len(deferred):
         cl.enqueue_copy(cl_device().queue, deferred, state.occlusion.deferred)
-    want = np.flatnonzero(occluded(bounds, depth_pyramid(keys_first), *cam.size))
+    span = occlusion_span(cl_device().is_gpu)
+    want = np.flatnonzero(occluded(bounds, depth_pyramid(keys_first), *cam.size, span))
     assert sorted(deferred.tolist()) == want.tolist()
     assert occ["drawn_first"] + occ["deferred"] == n
     # phase 2: the deferred ones not behind this frame's pyramid after phase 1
     current = state.occlusion.current.read()
-    assert occ["drawn_second"] == int((~occluded(bounds[deferred], current, *cam.size)).sum())
+    assert occ["drawn_second"] == int((~occluded(bounds[deferred], current, *cam.size, span)).sum())
     assert occ["occluded"] > n // 5, "the wall hides most tori: phase 2 should cull many patches"
 
 
 def test_a_box_is_tested_against_texels_near_its_size():
     # a wall at depth 1 over x < 40 of a 64 x 64 frame, background beyond. A box 13 px wide behind
-    # it, 3 px from its edge, is culled: at the level where at most 8 x 8 texels cover the box they
-    # lie on the wall (the 2 x 2 texels of 16 px that cover it would reach the background). A box
-    # whose margin reaches the edge is not.
+    # it, 3 px from its edge, is culled by the CPUs' test: at the level where at most 8 x 8 texels
+    # cover the box they lie on the wall. The 2 x 2 texels of 16 px that cover it (the GPUs' test)
+    # reach the background. A box whose margin reaches the edge is culled by neither.
     w = h = 64
     keys = np.full((h, w), np.iinfo(np.uint64).max, np.uint64)
     keys[:, :40] = np.uint64(np.float32(1.0).view(np.uint32)) << np.uint64(32)
     bounds = np.zeros((3, 8), np.float32)
     bounds[:, :4] = [(24, 24, 36, 36), (24, 24, 39.2, 36), (24, 24, 36, 36)]
     bounds[:, 4] = (2.0, 2.0, 0.5)   # nearest depths: behind, behind, in front of the wall
-    assert occluded(bounds, depth_pyramid(keys), w, h).tolist() == [True, False, False]
+    assert occluded(bounds, depth_pyramid(keys), w, h, 8).tolist() == [True, False, False]
+    assert occluded(bounds, depth_pyramid(keys), w, h, 2).tolist() == [False, False, False]
 
 
 @pytest.mark.parametrize("fname", ["sphere", "torus", "seashell3", "yarn", "sh_glyph", "giant_worm"])
