@@ -84,7 +84,7 @@ inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
     return (uint2)(wu, wv);
 }
 
-// A patch's two grid directions, as point_grid samples them and patch_chunks counts them.
+// A patch's two grid directions, as point_grid samples them and patch_units counts them.
 // Thin tubes (`curve` > 0: PointSettings.curve_factor, pixel coverage): a patch that wraps around
 // an axis whose loop measures at most 2 target pixels (at most one across) covers no pixel whole,
 // so the hole-free spacing of `factor` buys nothing around it: one line around. A loop of at
@@ -526,20 +526,35 @@ inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* 
     }
 }
 
-// Direct variant, in two kernels. The samples of all patches are cut into chunks of
-// POINTS_LOCAL (one per work-item of a work-group), a patch's chunks numbered consecutively:
-// points_schedule lists the patches with the number of their first chunk, then every work-group
-// of points_direct takes an equal, contiguous range of chunks. Patches differ in size by 100x
-// (an order-12 glyph at 1440 x 1440: 600 patches, 2 to 37,000 samples each); even shares are
-// up to 18% faster than a fixed number of work-groups per patch (docs/points.md).
+// Direct variant, in two kernels. The work of all patches is cut into units, a patch's units
+// numbered consecutively: points_schedule lists the patches with the number of their first unit,
+// then every work-group of points_direct takes an equal, contiguous range of units. Patches differ
+// in size by 100x (an order-12 glyph at 1440 x 1440: 600 patches, 2 to 37,000 samples each); even
+// shares are up to 18% faster than a fixed number of work-groups per patch (docs/points.md).
+// Packed (PL_PACK 1): a unit is a run of samples (patch_runs), and each work-item takes every
+// POINTS_LOCAL-th unit of its group's range, across patches. The fibre curtain's patches have
+// about 30 samples; a pass of the work-group each left most work-items idle. Otherwise (and for
+// quads) a unit is a chunk of POINTS_LOCAL runs (quads: blocks and runs, quad_runs), a pass of the
+// work-group per patch. CPUs always pack; GPUs only after a frame of small patches: packed, the
+// lanes of a warp set up their patches apart, and an H200 drew scenes of larger patches 1.04-1.18x
+// slower (paramlod/renderers/points.py packs; docs/points.md, "Packed work").
 // The patch count is read on the device (count[count_at], e.g. the LOD stage's render total,
 // capped at the list's capacity), so the host enqueues the LOD stage and these kernels without
 // waiting in between.
 
-// counters[SCHED_AT] = patches listed << CHUNK_BITS | chunks listed so far (zeroed with the
-// renderer's counters before points_schedule)
+// counters[SCHED_AT] = patches listed << CHUNK_BITS | units listed so far (zeroed with the
+// renderer's counters before points_schedule; paramlod/renderers/points.py refuses a frame of
+// 2^32 units or more, which order[] cannot number)
 #define SCHED_AT 4
 #define CHUNK_BITS 40
+#ifndef PL_PACK
+#define PL_PACK 1
+#endif
+#if PL_PACK && !PL_QUADS
+#define PL_PACKED 1u
+#else
+#define PL_PACKED 0u
+#endif
 #define CHUNK_MASK ((1ul << CHUNK_BITS) - 1ul)
 
 // A patch's samples in runs, one run a work-item (the surface split of paramlod.function.codegen_cl):
@@ -613,8 +628,8 @@ inline uint cover_quad(QuadVertex q00, QuadVertex q10, QuadVertex q01, QuadVerte
     return issued + cover_triangle(q00, q11, q01, cam, mat, light, object_id, color_buf, aux_buf);
 }
 
-inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
-                         float curve, uint measure, uint max_side) {
+inline uint patch_units(RenderPatch rp, __global const float* I, uint flags, uint split, float factor,
+                        float curve, uint measure, uint max_side) {
     GridAxis gu, gv;
     patch_axes(rp, I, flags, factor, curve, measure, max_side, &gu, &gv);
 #if PL_QUADS
@@ -622,13 +637,22 @@ inline uint patch_chunks(RenderPatch rp, __global const float* I, uint flags, ui
     return (q.blocks * q.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
 #else
     Runs r = patch_runs(split, gu.n - gu.wrap, gv.n - gv.wrap);
-    return (r.na * r.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
+    return PL_PACKED ? r.na * r.runs : (r.na * r.runs + POINTS_LOCAL - 1u) / POINTS_LOCAL;
 #endif
 }
 
+// The last place in order[lo, hi) whose first unit is <= c (order[lo]'s is)
+inline uint place_of(__global const ulong* order, uint lo, uint hi, uint c) {
+    while (hi - lo > 1u) {
+        uint mid = (lo + hi) / 2u;
+        if ((uint)(order[mid] >> 32) <= c) lo = mid; else hi = mid;
+    }
+    return lo;
+}
+
 // One work-item per patch: one 64-bit atomic gives the patch both its place in the schedule and
-// its first chunk, so first chunks increase with the place (points_direct searches them).
-// order[place] = first chunk << 32 | patch index. `tier`: only the patches of that hybrid tier
+// its first unit, so first units increase with the place (points_direct searches them).
+// order[place] = first unit << 32 | patch index. `tier`: only the patches of that hybrid tier
 // are listed (ALL_TIERS: every patch).
 #define ALL_TIERS 0xFFFFFFFFu
 __kernel void points_schedule(__global const RenderPatch* patches, __global const uint* count,
@@ -642,7 +666,7 @@ __kernel void points_schedule(__global const RenderPatch* patches, __global cons
         RenderPatch rp = patches[pid];
         if (tier != ALL_TIERS && ((rp.flags >> TIER_SHIFT) & 3u) != tier) continue;
         __global const uint* U = inst_u + rp.inst * INST_U;
-        ulong k = patch_chunks(rp, inst_f + rp.inst * INST_F, U[INST_FLAGS], pl_split(U[INST_FUNC]), factor,
+        ulong k = patch_units(rp, inst_f + rp.inst * INST_F, U[INST_FLAGS], pl_split(U[INST_FUNC]), factor,
                                curve, measure, max_side);
         ulong old = atom_add(&counters[SCHED_AT], (1ul << CHUNK_BITS) | k);
         order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
@@ -683,16 +707,13 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
     ulong groups = get_num_groups(0), group = get_group_id(0);
     uint c = (uint)(group * total / groups), c_end = (uint)((group + 1) * total / groups);
     ulong n_samples = 0, n_atomics = 0, n_nan = 0, n_capped = 0;
+#if PL_PACKED
+    c += get_local_id(0);   // this work-item's first unit; then every POINTS_LOCAL-th
+#endif
     if (c < c_end) {
-        // the last place whose first chunk is <= c (binary search; place 0 starts at chunk 0)
-        uint lo = 0, hi = n_patches;
-        while (hi - lo > 1u) {
-            uint mid = (lo + hi) / 2u;
-            if ((uint)(order[mid] >> 32) <= c) lo = mid; else hi = mid;
-        }
-        uint place = lo;
+        uint place = place_of(order, 0u, n_patches, c);   // place 0 starts at unit 0
         uint W = (uint)cam[CAM_W], H = (uint)cam[CAM_H], layer_pixels = W * H;
-        while (c < c_end) {   // one patch per pass: its chunks in [c, c_end)
+        while (c < c_end) {   // the patch at `place`: its units in [c, c_end)
             ulong entry = order[place];
             uint first = (uint)(entry >> 32), pid = (uint)entry;
             uint next = place + 1u < n_patches ? (uint)(order[place + 1u] >> 32) : (uint)total;
@@ -707,7 +728,11 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
 #if PL_VIEWS   // the views that see the patch (the LOD stage's render_views): the others are skipped
             ulong seen = view_masks[pid];
 #endif
+#if PL_PACKED   // the work-item of the patch's first unit counts it
+            if (c == first && g.capped) n_capped++;
+#else
             if (c == first && get_local_id(0) == 0 && g.capped) n_capped++;
+#endif
 #if PL_QUADS
             QuadRuns qr = quad_runs(pl_split(func), g.nu_grid, g.nv_grid);
             for (; c < min(next, c_end); ++c) {
@@ -775,9 +800,10 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
             }
 #else
             Runs runs = patch_runs(pl_split(func), g.nu, g.nv);
-            for (; c < min(next, c_end); ++c) {
-                uint unit = (c - first) * POINTS_LOCAL + get_local_id(0);   // the patch's run
-                if (unit >= runs.na * runs.runs) continue;   // the patch's last chunk is partly empty
+            for (; c < min(next, c_end); c += PL_PACKED ? POINTS_LOCAL : 1u) {
+                // the patch's run
+                uint unit = PL_PACKED ? c - first : (c - first) * POINTS_LOCAL + get_local_id(0);
+                if (unit >= runs.na * runs.runs) continue;   // chunks: the patch's last is partly empty
                 uint ia = unit % runs.na, ib0 = unit / runs.na * runs.len;
 #if PL_RUN > 1
                 uint ib1 = min(ib0 + runs.len, runs.nb);
@@ -859,7 +885,8 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
                 }
             }
 #endif
-            place++;
+            // packed: the patch holding c, at most POINTS_LOCAL places on (each patch has a unit)
+            place = PL_PACKED ? place_of(order, place, min(place + POINTS_LOCAL + 1u, n_patches), c) : place + 1u;
         }
     }
 #ifdef PL_GROUP_COUNTERS

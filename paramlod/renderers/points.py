@@ -9,6 +9,7 @@ import numpy as np
 import pyopencl as cl
 
 from paramlod.device.context import cl_device
+from paramlod.errors import CapacityError
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import POINT_TIERS, tier_divisors
@@ -21,11 +22,25 @@ from paramlod.function.programs import POLY_TRIG, VECTOR, build, sample_run
 
 LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
+CHUNK_BITS = 40   # points.cl: the schedule's counter holds the units listed in its low 40 bits
+# points.cl order[]: a patch's first unit in 32 bits (and a work-item's unit may pass the last by
+# POINTS_LOCAL)
+MAX_UNITS = 0xFFFFFFFF - LOCAL_SIZE
 # occlusion = "auto": culling is used while it saves at least this share of a frame's samples
 # (measured on the H200, docs/points.md: culling that removed 6 % of the samples cost 7 % of the
 # frame, 13-30 % paid 1.18-1.38x; the pyramid and the second pass cost 0.3-0.6 ms a frame)
 AUTO_MIN_SAVED = 0.1
 AUTO_PROBE = 16   # every 16th frame is drawn the other way, so the choice follows camera and scene
+# GPUs draw a frame's work packed (points.cl PL_PACK) after a frame whose render patches had fewer
+# samples than half a work-group on average: on an H200 packing took the fibre curtain's render
+# (19-30 samples a patch) to 0.48-0.83x, and the 19,600 glyphs' at 34 a patch to 1.06x
+# (docs/points.md, "Packed work")
+PACK_BELOW = LOCAL_SIZE // 2
+
+
+def packs(samples: int, patches: int) -> bool:
+    """Whether a GPU draws the next frame packed, after a frame of ``samples`` over ``patches``."""
+    return samples < PACK_BELOW * patches
 
 
 class AutoOcclusion:
@@ -71,6 +86,10 @@ class DirectPointRenderer:
     # CPU devices: a run's samples (or quad corners) evaluated on vector lanes (points.cl
     # surface_lanes); False, one at a time, as GPUs do: the tests' reference for the vector path
     vector_lanes = True
+    # points.cl PL_PACK: each work-item its own runs across patches, or a pass of the work-group
+    # per patch. None: CPUs always pack; GPUs choose frame by frame (packs, choose_packing)
+    pack = None
+    groups_per_unit = None   # work-groups per compute unit; None: the device's (below)
 
     def __init__(self, functions, record: bool = False):
         defines = {"PL_RECORD": 1} if record else {}
@@ -81,11 +100,14 @@ class DirectPointRenderer:
         defines["PL_RUN"] = sample_run(cl_device().is_gpu)   # points.cl patch_runs
         defines["OCC_SPAN"] = occlusion_span(cl_device().is_gpu)   # occlusion.cl occluded
         self._functions, self._defines = functions, defines
+        self._auto_pack = self.pack is None and cl_device().is_gpu
+        self.packed = not cl_device().is_gpu if self.pack is None else bool(self.pack)
+        self._program_packed = self.packed
         # the program of one-view frames with pixel coverage, which occlusion.cl shares (the
         # function code is compiled once; OcclusionCuller takes its kernels whatever the frame's
         # kind); the other kinds are built when first drawn (program_for)
         self.program = build(["common/keys.cl", "points/points.cl", "points/occlusion.cl"], functions,
-                             self._kind_defines("pixel", False))
+                             self._kind_defines("pixel", False, self.packed))
         # own kernel objects per list drawn in a frame (all patches, the two occlusion phases, the
         # hybrid tiers) and kind of frame: arguments are set only when they change (see enqueue)
         self._launches: dict = {}
@@ -94,26 +116,34 @@ class DirectPointRenderer:
         # COUNTERS, then the schedule's counter (kernels/points.cl, SCHED_AT)
         self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * (len(COUNTERS) + 1))
         self._count = cl.Buffer(dev.context, cl.mem_flags.READ_ONLY, 4)   # a host-given patch count
-        self._counts = np.zeros(len(COUNTERS), np.uint64)
+        self._counts = np.zeros(len(COUNTERS) + 1, np.uint64)   # and the schedule's counter
         self._order, self.order_capacity = None, 0   # the schedule: 8 bytes a patch
         self.events = ()
         # work-groups share the samples evenly: about one resident wave on a GPU
-        self.max_groups = dev.device.max_compute_units * (32 if dev.is_gpu else 256)
+        per_unit = self.groups_per_unit or (32 if dev.is_gpu else 256)
+        self.max_groups = dev.device.max_compute_units * per_unit
 
-    def _kind_defines(self, coverage: str, views: bool) -> dict:
+    def _kind_defines(self, coverage: str, views: bool, packed: bool) -> dict:
         defines = {**self._defines, "PL_CENTRE": int(coverage == "centre"), "PL_QUADS": int(coverage == "quad"),
-                   "PL_VIEWS": int(views)}
+                   "PL_VIEWS": int(views), "PL_PACK": int(packed)}
         if self._defines["PL_RUN"] > 1 and self.vector_lanes:   # CPUs: samples on vector lanes (points.cl surface_lanes)
             defines[VECTOR] = 1
         return defines
 
-    def program_for(self, coverage: str, views: bool):
-        """The program whose points_direct is compiled for ``coverage`` (PointSettings.coverage)
-        and for several views a frame (``views``) or without them (points.cl PL_CENTRE, PL_QUADS,
-        PL_VIEWS: the GPU draws much faster without code it does not run)."""
-        if coverage == "pixel" and not views:
+    def program_for(self, coverage: str, views: bool, packed: bool):
+        """The program whose points_direct is compiled for ``coverage`` (PointSettings.coverage),
+        for several views a frame (``views``) or without them, packed or not (points.cl PL_CENTRE,
+        PL_QUADS, PL_VIEWS, PL_PACK: the GPU draws much faster without code it does not run)."""
+        if coverage == "pixel" and not views and packed == self._program_packed:
             return self.program
-        return build(["common/keys.cl", "points/points.cl"], self._functions, self._kind_defines(coverage, views))
+        return build(["common/keys.cl", "points/points.cl"], self._functions,
+                     self._kind_defines(coverage, views, packed))
+
+    def choose_packing(self, samples: int, patches: int):
+        """After a frame (its samples and render patches): whether the next is drawn packed (GPUs
+        with ``pack`` None: ``packs``)."""
+        if self._auto_pack and patches:
+            self.packed = packs(samples, patches)
 
     def enqueue(self, patches_buf, count_buf, count_at: int, capacity: int, inst, materials_buf, cam_buf,
                 light_buf, keys, settings: PointSettings, record_args=(), n_views: int = 1, view_masks=None,
@@ -154,7 +184,7 @@ class DirectPointRenderer:
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time
-        kind = (settings.coverage, n_views > 1)
+        kind = (settings.coverage, n_views > 1, self.packed and settings.coverage != "quad")
         k = self._launches.get((phase, tier, kind))
         if k is None:
             k = self._launches[(phase, tier, kind)] = _Launch(self.program_for(*kind))
@@ -183,6 +213,11 @@ class DirectPointRenderer:
         """The last render's counters (COUNTERS); ``wait``: read them now (waits for the render)."""
         if wait:
             cl.enqueue_copy(cl_device().queue, self._counts, self.counters)
+        units = int(self._counts[-1]) & ((1 << CHUNK_BITS) - 1)
+        if units > MAX_UNITS:
+            raise CapacityError(f"points: a frame of {units:,} sample runs, more than the schedule numbers "
+                                f"({MAX_UNITS:,}); draw at a smaller size or supersampling, or with fewer samples "
+                                f"(PointSettings.density)")
         return {k: int(v) for k, v in zip(COUNTERS, self._counts)}
 
     def draw(self, patches_buf, n_patches, inst, materials_buf, cam_buf, light_buf, keys,
@@ -273,6 +308,7 @@ class DirectPoints:
                "tier_patches": [sum(s["tiers"][t] for s in steps) for t in range(3)],
                **self.points.counts(wait=False),
                "ms": {"lod": self.lod.device_ms(), "render": self.points.device_ms()}}
+        self.points.choose_packing(out["samples"], n)
         if self.culled:   # render: from the first bound to the last sample
             c = self.occlusion.counts()
             out["occlusion"] = {"drawn_first": c["early"], "deferred": c["deferred"], "drawn_second": c["late"],

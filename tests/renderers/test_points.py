@@ -17,7 +17,7 @@ from paramlod.device.context import cl_device
 from paramlod.function import programs as function_programs
 from paramlod.function.codegen_cl import SPLIT_NONE, SPLIT_U, SPLIT_V, surface_split
 from paramlod.scene.framing import framing_camera
-from paramlod.renderers.points import DirectPointRenderer, grid_counts, patch_wraps
+from paramlod.renderers.points import DirectPointRenderer, grid_counts, packs, patch_wraps
 from paramlod.renderers.targets import KeyBuffer
 
 from conftest import check_every_sample_once, iou, record_direct_points, sphere_disc
@@ -46,6 +46,36 @@ def test_runs_of_split_functions_visit_every_sample_once(monkeypatch):
                                                                     scene, cam)))
     for color in colors[1:]:
         np.testing.assert_array_equal(color, colors[0])
+
+
+@pytest.mark.parametrize("run", [1, 16])
+def test_packed_work_draws_the_keys_of_a_pass_per_patch(run, monkeypatch):
+    # many small patches (40 thin rings and a fibre, a unit or a few each) and large ones (a sphere):
+    # work-items that take their own runs across patches (PL_PACK 1) visit every sample once and
+    # leave the keys of a pass of the work-group per patch (PL_PACK 0), with runs of one sample
+    # (as on GPUs) and of 16. One work-group per compute unit: each takes hundreds of units, so
+    # a work-item's next unit is often several patches on
+    scene = pl.Scene()
+    for k in range(40):
+        scene.add("torus", params={"major": 0.12, "minor": 0.002 + 0.001 * (k % 5)},
+                  transform=pl.translate(0.3 * (k % 8) - 1.05, 0.3 * (k // 8) - 0.6, 0.0) @ pl.rotate(9 * k, (1, 0, 0)))
+    scene.add("fiber", transform=pl.translate(0.0, -1.0, 0.0) @ pl.scale(0.08))
+    scene.add("sphere", transform=pl.translate(1.4, 0.0, -1.0) @ pl.scale(0.5))
+    cam = framing_camera(scene, size=(160, 120))
+    monkeypatch.setattr(function_programs, "RUN_CPU", run)
+    monkeypatch.setattr(DirectPointRenderer, "groups_per_unit", 1)
+    colors = []
+    for pack in (True, False):
+        monkeypatch.setattr(DirectPointRenderer, "pack", pack)
+        colors.append(check_every_sample_once(*record_direct_points(pl.PointSettings(coverage="pixel"), cam.size,
+                                                                    scene, cam)))
+    np.testing.assert_array_equal(colors[0], colors[1])
+
+
+def test_gpus_pack_after_frames_of_small_patches():
+    # the fibre curtain's patches (19-30 samples) are drawn packed; the 19,600 glyphs' far away
+    # (34) and larger ones keep a pass of the work-group each
+    assert packs(30 * 358_140, 358_140) and not packs(34 * 19_600, 19_600) and not packs(5_402 * 3_786, 3_786)
 
 
 def split_kind(fn):
