@@ -543,9 +543,11 @@ inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* 
 // waiting in between.
 
 // counters[SCHED_AT] = patches listed << CHUNK_BITS | units listed so far (zeroed with the
-// renderer's counters before points_schedule; paramlod/renderers/points.py refuses a frame of
-// 2^32 units or more, which order[] cannot number)
+// renderer's counters before points_schedule); counters[UNITS_AT]: the most units a list of the
+// frame had (paramlod/renderers/points.py refuses a frame past MAX_UNITS: order[] numbers units
+// in 32 bits)
 #define SCHED_AT 4
+#define UNITS_AT 5
 #define CHUNK_BITS 40
 #ifndef PL_PACK
 #define PL_PACK 1
@@ -704,6 +706,8 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
 {
     uint n_patches = (uint)(counters[SCHED_AT] >> CHUNK_BITS);   // the patches listed
     ulong total = counters[SCHED_AT] & CHUNK_MASK;
+    if (get_global_id(0) == 0) atom_max(&counters[UNITS_AT], total);
+    if (total > 0xFFFFFFFFul - POINTS_LOCAL) return;   // refused by the host, drawn by nothing
     ulong groups = get_num_groups(0), group = get_group_id(0);
     uint c = (uint)(group * total / groups), c_end = (uint)((group + 1) * total / groups);
     ulong n_samples = 0, n_atomics = 0, n_nan = 0, n_capped = 0;

@@ -22,9 +22,8 @@ from paramlod.function.programs import POLY_TRIG, VECTOR, build, sample_run
 
 LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
-CHUNK_BITS = 40   # points.cl: the schedule's counter holds the units listed in its low 40 bits
 # points.cl order[]: a patch's first unit in 32 bits (and a work-item's unit may pass the last by
-# POINTS_LOCAL)
+# POINTS_LOCAL); points_direct draws nothing of a list past it
 MAX_UNITS = 0xFFFFFFFF - LOCAL_SIZE
 # occlusion = "auto": culling is used while it saves at least this share of a frame's samples
 # (measured on the H200, docs/points.md: culling that removed 6 % of the samples cost 7 % of the
@@ -113,10 +112,10 @@ class DirectPointRenderer:
         self._launches: dict = {}
         self.record = record
         dev = cl_device()
-        # COUNTERS, then the schedule's counter (kernels/points.cl, SCHED_AT)
-        self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * (len(COUNTERS) + 1))
+        # COUNTERS, then the schedule's counter and the largest list's units (points.cl SCHED_AT, UNITS_AT)
+        self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * (len(COUNTERS) + 2))
         self._count = cl.Buffer(dev.context, cl.mem_flags.READ_ONLY, 4)   # a host-given patch count
-        self._counts = np.zeros(len(COUNTERS) + 1, np.uint64)   # and the schedule's counter
+        self._counts = np.zeros(len(COUNTERS) + 2, np.uint64)   # and SCHED_AT, UNITS_AT
         self._order, self.order_capacity = None, 0   # the schedule: 8 bytes a patch
         self.events = ()
         # work-groups share the samples evenly: about one resident wave on a GPU
@@ -173,7 +172,7 @@ class DirectPointRenderer:
             self._order = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8 * capacity)
             self.order_capacity = capacity
         if phase == 0:
-            cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 1))
+            cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 2))
         else:   # only the schedule's counter
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * len(COUNTERS), 8)
         sampling = (settings.factor(scale), settings.curve_factor(scale),
@@ -213,7 +212,7 @@ class DirectPointRenderer:
         """The last render's counters (COUNTERS); ``wait``: read them now (waits for the render)."""
         if wait:
             cl.enqueue_copy(cl_device().queue, self._counts, self.counters)
-        units = int(self._counts[-1]) & ((1 << CHUNK_BITS) - 1)
+        units = int(self._counts[-1])   # UNITS_AT: the largest list's
         if units > MAX_UNITS:
             raise CapacityError(f"points: a frame of {units:,} sample runs, more than the schedule numbers "
                                 f"({MAX_UNITS:,}); draw at a smaller size or supersampling, or with fewer samples "

@@ -17,6 +17,7 @@ from paramlod.device.context import cl_device
 from paramlod.function import programs as function_programs
 from paramlod.function.codegen_cl import SPLIT_NONE, SPLIT_U, SPLIT_V, surface_split
 from paramlod.scene.framing import framing_camera
+from paramlod.renderers import points as points_module
 from paramlod.renderers.points import DirectPointRenderer, grid_counts, packs, patch_wraps
 from paramlod.renderers.targets import KeyBuffer
 
@@ -76,6 +77,16 @@ def test_gpus_pack_after_frames_of_small_patches():
     # the fibre curtain's patches (19-30 samples) are drawn packed; the 19,600 glyphs' far away
     # (34) and larger ones keep a pass of the work-group each
     assert packs(30 * 358_140, 358_140) and not packs(34 * 19_600, 19_600) and not packs(5_402 * 3_786, 3_786)
+
+
+def test_a_frame_of_more_units_than_the_schedule_numbers_is_refused(monkeypatch):
+    # order[] holds a patch's first unit in 32 bits: a frame past that would draw wrong patches,
+    # so it is refused by name (the limit lowered here to a sphere's units)
+    monkeypatch.setattr(points_module, "MAX_UNITS", 100)
+    scene = pl.Scene()
+    scene.add("sphere")
+    with pytest.raises(pl.CapacityError, match="sample runs, more than the schedule numbers"):
+        pl.render(scene, pl.Camera.look_at((0, 0, 3), (0, 0, 0), size=(64, 48)), "points")
 
 
 def split_kind(fn):
