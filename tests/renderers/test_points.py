@@ -16,6 +16,7 @@ from paramlod.core.layouts import cl_prelude
 from paramlod.device.context import cl_device
 from paramlod.function import programs as function_programs
 from paramlod.function.codegen_cl import SPLIT_NONE, SPLIT_U, SPLIT_V, surface_split
+from paramlod.pipeline.driver import scene_state
 from paramlod.scene.framing import framing_camera
 from paramlod.renderers import points as points_module
 from paramlod.renderers.points import DirectPointRenderer, grid_counts, packs, patch_wraps
@@ -77,6 +78,30 @@ def test_gpus_pack_after_frames_of_small_patches():
     # the fibre curtain's patches (19-30 samples) are drawn packed; the 19,600 glyphs' far away
     # (34) and larger ones keep a pass of the work-group each
     assert packs(30 * 358_140, 358_140) and not packs(34 * 19_600, 19_600) and not packs(5_402 * 3_786, 3_786)
+
+
+def test_a_gpu_switches_to_packed_work_after_a_frame_of_small_patches():
+    # the GPUs' choice, made here on the CPU: a frame of 40 thin rings drawn a pass of the
+    # work-group per patch has under 32 samples a patch, so the next is drawn packed, with the
+    # same image
+    rings = pl.Scene()
+    for k in range(40):
+        rings.add("torus", params={"major": 0.04, "minor": 0.002},
+                  transform=pl.translate(0.3 * (k % 8) - 1.05, 0.3 * (k // 8) - 0.6, 0.0))
+    cam = framing_camera(rings, size=(160, 120))
+    rs = pl.RenderSettings()
+    rs.points.occlusion = False
+    pl.render(rings, cam, "points", rs)   # builds the scene's renderer (a CPU's packs always)
+    sampler = next(r.points for r in scene_state(rings).renderer_states()
+                   if isinstance(getattr(r, "points", None), DirectPointRenderer))
+    sampler._auto_pack, sampler.packed = True, False
+    first = pl.render(rings, cam, "points", rs)
+    assert first.stats["samples"] < 32 * first.stats["render_patches"] and sampler.packed
+    second = pl.render(rings, cam, "points", rs)
+    np.testing.assert_array_equal(second.rgb8(), first.rgb8())
+    np.testing.assert_array_equal(second.depth, first.depth)
+    kinds = {kind for _, _, kind in sampler._launches}
+    assert kinds == {("pixel", False, False), ("pixel", False, True)}
 
 
 def test_a_frame_of_more_units_than_the_schedule_numbers_is_refused(monkeypatch):
