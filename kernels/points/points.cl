@@ -90,7 +90,8 @@ inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
 // so the hole-free spacing of `factor` buys nothing around it: one line around. A loop of at
 // least 1 pixel (a tube at least half a pixel across) is also sampled along at `curve`, at most a
 // pixel apart, so the pixels it lands in stay 8-connected as a rasterized line's; thinner tubes
-// share pixels with their neighbours, and the denser samples decide which is in front (docs/points.md, "Thin tubes"). v is tested first.
+// share pixels with their neighbours, and the denser samples decide which is in front
+// (docs/points.md, "Thin tubes"). v is tested first.
 inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, float factor, float curve,
                        uint measure, uint max_side, GridAxis* gu, GridAxis* gv) {
     float2 m = patch_measure(rp, measure);

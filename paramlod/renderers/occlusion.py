@@ -20,6 +20,7 @@ from paramlod.device.programs import launch
 GRID = 5        # positions per side of a patch's bound (occlusion.cl OCC_GRID)
 BOUND_FLOATS = 8
 COUNTS = ("early", "deferred", "late")   # occlusion.cl counts[0..2]
+LOCAL = 64
 
 
 def occlusion_span(gpu: bool) -> int:
@@ -28,7 +29,6 @@ def occlusion_span(gpu: bool) -> int:
     finer test made `occlusion = "auto"` cull the seashells' frames of about 1 ms, whose culling
     costs more than the samples it spares (an H100: 0.77-0.95x the frame rate)."""
     return 2 if gpu else 8
-LOCAL = 64
 
 
 def pyramid_levels(width: int, height: int) -> list[tuple[int, int]]:

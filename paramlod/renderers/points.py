@@ -22,6 +22,7 @@ from paramlod.function.programs import POLY_TRIG, VECTOR, build, sample_run
 
 LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
+COUNTER_WORDS = len(COUNTERS) + 2   # and points.cl SCHED_AT, UNITS_AT
 # points.cl order[]: a patch's first unit in 32 bits (and a work-item's unit may pass the last by
 # POINTS_LOCAL); points_direct draws nothing of a list past it
 MAX_UNITS = 0xFFFFFFFF - LOCAL_SIZE
@@ -113,9 +114,9 @@ class DirectPointRenderer:
         self.record = record
         dev = cl_device()
         # COUNTERS, then the schedule's counter and the largest list's units (points.cl SCHED_AT, UNITS_AT)
-        self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * (len(COUNTERS) + 2))
+        self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * COUNTER_WORDS)
         self._count = cl.Buffer(dev.context, cl.mem_flags.READ_ONLY, 4)   # a host-given patch count
-        self._counts = np.zeros(len(COUNTERS) + 2, np.uint64)   # and SCHED_AT, UNITS_AT
+        self._counts = np.zeros(COUNTER_WORDS, np.uint64)
         self._order, self.order_capacity = None, 0   # the schedule: 8 bytes a patch
         self.events = ()
         # work-groups share the samples evenly: about one resident wave on a GPU
@@ -172,7 +173,7 @@ class DirectPointRenderer:
             self._order = cl.Buffer(cl_device().context, cl.mem_flags.READ_WRITE, 8 * capacity)
             self.order_capacity = capacity
         if phase == 0:
-            cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * (len(COUNTERS) + 2))
+            cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * COUNTER_WORDS)
         else:   # only the schedule's counter
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * len(COUNTERS), 8)
         sampling = (settings.factor(scale), settings.curve_factor(scale),
@@ -183,6 +184,7 @@ class DirectPointRenderer:
                 self.counters, *record_args)
         # the same buffers and values frame after frame: converting ~20 arguments each time was a
         # measurable share of a frame's Python time
+        # quads ignore PL_PACK (points.cl PL_PACKED): one program for them
         kind = (settings.coverage, n_views > 1, self.packed and settings.coverage != "quad")
         k = self._launches.get((phase, tier, kind))
         if k is None:

@@ -50,6 +50,16 @@ def test_runs_of_split_functions_visit_every_sample_once(monkeypatch):
         np.testing.assert_array_equal(color, colors[0])
 
 
+def ring_grid(major: float, minor, tilt: float = 0.0) -> pl.Scene:
+    """40 rings 0.3 apart on an 8 x 5 grid: ring k of minor radius ``minor(k)``, turned ``tilt`` x k
+    degrees about x."""
+    scene = pl.Scene()
+    for k in range(40):
+        scene.add("torus", params={"major": major, "minor": minor(k)},
+                  transform=pl.translate(0.3 * (k % 8) - 1.05, 0.3 * (k // 8) - 0.6, 0.0) @ pl.rotate(tilt * k, (1, 0, 0)))
+    return scene
+
+
 @pytest.mark.parametrize("run", [1, 16])
 def test_packed_work_draws_the_keys_of_a_pass_per_patch(run, monkeypatch):
     # many small patches (40 thin rings and a fibre, a unit or a few each) and large ones (a sphere):
@@ -57,10 +67,7 @@ def test_packed_work_draws_the_keys_of_a_pass_per_patch(run, monkeypatch):
     # leave the keys of a pass of the work-group per patch (PL_PACK 0), with runs of one sample
     # (as on GPUs) and of 16. One work-group per compute unit: each takes hundreds of units, so
     # a work-item's next unit is often several patches on
-    scene = pl.Scene()
-    for k in range(40):
-        scene.add("torus", params={"major": 0.12, "minor": 0.002 + 0.001 * (k % 5)},
-                  transform=pl.translate(0.3 * (k % 8) - 1.05, 0.3 * (k // 8) - 0.6, 0.0) @ pl.rotate(9 * k, (1, 0, 0)))
+    scene = ring_grid(0.12, lambda k: 0.002 + 0.001 * (k % 5), tilt=9.0)
     scene.add("fiber", transform=pl.translate(0.0, -1.0, 0.0) @ pl.scale(0.08))
     scene.add("sphere", transform=pl.translate(1.4, 0.0, -1.0) @ pl.scale(0.5))
     cam = framing_camera(scene, size=(160, 120))
@@ -84,10 +91,7 @@ def test_a_gpu_switches_to_packed_work_after_a_frame_of_small_patches():
     # the GPUs' choice, made here on the CPU: a frame of 40 thin rings drawn a pass of the
     # work-group per patch has under 32 samples a patch, so the next is drawn packed, with the
     # same image
-    rings = pl.Scene()
-    for k in range(40):
-        rings.add("torus", params={"major": 0.04, "minor": 0.002},
-                  transform=pl.translate(0.3 * (k % 8) - 1.05, 0.3 * (k // 8) - 0.6, 0.0))
+    rings = ring_grid(0.04, lambda k: 0.002)
     cam = framing_camera(rings, size=(160, 120))
     rs = pl.RenderSettings()
     rs.points.occlusion = False
