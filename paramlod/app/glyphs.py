@@ -76,6 +76,11 @@ def render_slice(path, basis, legacy, mask, stride, k, color, variant, size, out
 
 
 def run_glyphs(args) -> int:
+    volume_only = [opt for opt, given in (("--mask", args.mask), ("--stride", args.stride != 1),
+                                          ("--slice", args.slice is not None), ("--legacy", args.legacy)) if given]
+    if Path(args.path).suffix == ".npz" and volume_only:   # a field .npz would draw every glyph regardless
+        raise DmriError(f"{args.path}: {', '.join(volume_only)} apply to NIfTI SH volumes; a field .npz is "
+                        "stored already sampled")
     if args.slices is not None or dist.job_requested(args):
         return run_slices(args)
     frame, field = glyph_frame(args.path, args.basis, args.legacy, args.mask, args.stride, args.slice, args.color,

@@ -41,6 +41,9 @@ OBJECT_KEYS = {"function", "params", "color", "specular", "two_sided", "translat
                "instances", "sh_field", "surfels", "mesh", "lod", "skinned", "animation", "time"}
 SOURCE_KEYS = ("function", "mesh", "surfels", "sh_field")   # what an object is made of: one of them (or skinned)
 SKINNED_KEYS = ("animation", "time")   # only with skinned = "x.glb"
+# fields of a function object that other sources take none of (skinned meshes: _check_skinned_keys)
+NOT_FOR = {"surfels": {"params", "instances", "variant"}, "sh_field": {"params", "instances"}}
+SH_FIELD_KEYS = {"scale", "normalize", "color_by", "subtract_min"}   # ShField.to_scene's, with path
 MESH_LODS = ("dag", "full", "chain")
 ANIMATION_KEYS = {"frames", "t0", "t1", "fps"}
 TRUST_ENV = "PARAMLOD_TRUST_SCENE"   # "1": scene files may import and run any module:function (a builder)
@@ -231,6 +234,9 @@ def load_scene(path, size=None) -> SceneFile:
             if not _is_param_value(value):
                 ck.fail(f"{where}.params.{name}", f"must be a number or a list of numbers, got {value!r}",
                         "objects", i, "params")
+        for source, keys in NOT_FOR.items():   # fields that would be silently ignored
+            for k in (keys & set(o) if source in o else ()):
+                ck.fail(f"{where}.{k}", f"does not apply to a {source} object", "objects", i, k)
         if "skinned" in o:
             _check_skinned_keys(o, ck, where, i)
         else:
@@ -287,13 +293,17 @@ def load_scene(path, size=None) -> SceneFile:
     mesh_default = KINDS["mesh"].variant_for(variant) if "mesh" in KINDS else "meshlets"   # what draws a mesh here
     per = [o.get("variant", mesh_default if {"mesh", "skinned"} & set(o) else variant) for o in objects]
     mixed = per if any("variant" in o for o in objects) and len(set(per)) > 1 else None
-    if mixed is None and any("variant" in o for o in objects):
-        variant = per[0]
+    object_aa = ""
+    if mixed is None and any("variant" in o for o in objects):   # every object's 'variant[:AA]' is the frame's
+        variant, _, object_aa = per[0].partition(":")
+        settings.tess.aa = object_aa or settings.tess.aa
     try:   # `aa` holds for the point variant too, which supersamples only
         # the frame's variant is named only when the file sets aa (a points-ssaa file without aa keeps its ss)
         settings.apply_aa(settings.tess.aa, points_only=mixed is None and variant == "points",
-                          variant=variant if mixed is None and "aa" in r else None)
+                          variant=variant if mixed is None and ("aa" in r or object_aa) else None)
     except SceneError as exc:
+        if object_aa:
+            ck.fail("objects[0].variant", str(exc), "objects", 0, "variant")
         ck.fail("render.aa", str(exc), "render", None, "aa")
     meta = data.get("meta", {})
     if not isinstance(meta, dict):
@@ -521,6 +531,12 @@ def _add_sh_field(scene, spec, path, m, mat, ck, where, i):
     file = (path.parent / spec.pop("path")).resolve()
     load_keys = {"basis", "legacy", "stride"}
     load = {k: spec.pop(k) for k in list(spec) if k in load_keys}
+    unknown = set(spec) - SH_FIELD_KEYS
+    if unknown or (load and file.suffix == ".npz"):
+        key = sorted(unknown or load)[0]
+        ck.fail(f"{where}.sh_field.{key}", f"unknown field (sh_field takes path, {', '.join(sorted(SH_FIELD_KEYS))}, and for "
+                f"a NIfTI volume {', '.join(sorted(load_keys))})" if unknown else
+                f"is for NIfTI volumes: a .npz field is stored already sampled", "objects", i, "sh_field")
     try:
         if file.suffix == ".npz":
             field = dmri.load_field_npz(file)
@@ -596,6 +612,9 @@ def _transform(o, ck: _Checker, where, i) -> np.ndarray:
         s = o["scale"]
         if _number(s) and s > 0:
             m = m @ scale(s)
+        elif _number(s):
+            ck.fail(f"{where}.scale", f"a single scale must be a number > 0 (mirror with [-1, 1, 1]), got {s!r}",
+                    "objects", i, "scale")
         else:
             m = m @ scale(*ck.vec(o, "scale", 3, where, "objects", i))
     return m

@@ -11,6 +11,7 @@ from paramlod.errors import SceneError
 
 PLACE_LIMIT = 1e15   # largest |coordinate| / |scale| a transform or camera may hold
 MIN_SCALE = 1e-15    # smallest |scale| of a transform's 3x3 part (its determinant's cube root)
+AFFINE_TOL = 1e-9    # how far a bottom row may stray from [0, 0, 0, 1] (rounding in a product)
 
 
 def check_values(values, what: str) -> np.ndarray:
@@ -35,6 +36,12 @@ def check_transform(m, what: str = "a transform") -> np.ndarray:
     a = check_values(m, what)
     if a.shape[-2:] != (4, 4):
         raise SceneError(f"{what} must be a 4x4 matrix, got shape {a.shape}")
+    # the renderers apply a transform's top three rows (affine); a projective bottom row would be ignored
+    off = np.flatnonzero(np.atleast_1d(np.abs(a[..., 3, :] - (0.0, 0.0, 0.0, 1.0)).max(axis=-1) > AFFINE_TOL))
+    if off.size:
+        which, row = (what, a[3]) if a.ndim == 2 else (f"{what} [{int(off[0])}]", a.reshape(-1, 4, 4)[off[0], 3])
+        raise SceneError(f"{which} must be affine: its bottom row must be [0, 0, 0, 1], got "
+                         f"{np.array2string(row, precision=6, separator=', ')}")
     det = np.abs(np.linalg.det(a[..., :3, :3]))
     # a uniform scale s has det s^3: 1e-45 is a scale of 1e-15
     bad = np.flatnonzero(np.atleast_1d(det < MIN_SCALE ** 3))

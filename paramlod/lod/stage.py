@@ -63,9 +63,13 @@ class LodSettings:
                 np.uint32(max(1, int(np.ceil(self.spot_share * SPOT_SUBS)))))
 
     def validate(self):
-        tu, tv = self.threshold
-        if not (tu > 0 and tv > 0):
-            raise SceneError(f"lod threshold must be positive pixels, got {self.threshold}")
+        t = self.threshold
+        if isinstance(t, (int, float, np.integer, np.floating)) and not isinstance(t, bool):
+            self.threshold = t = (float(t), float(t))   # one number for both, as a scene file's threshold
+        ok = isinstance(t, (tuple, list, np.ndarray)) and len(t) == 2 and all(
+            isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and x > 0 for x in t)
+        if not ok:
+            raise SceneError(f"lod threshold must be positive pixels, one number or two (t_u, t_v), got {t!r}")
         if not 1 <= self.max_steps <= 15:
             raise SceneError(f"lod max_steps must be in 1..15, got {self.max_steps}")
         gu, gv = self.initial_grid
@@ -349,7 +353,7 @@ class LodStage:
         if n > settings.max_patches:
             raise CapacityError(
                 f"the LOD stage needs {n} {what}, more than max_patches={settings.max_patches}; "
-                "raise [lod] max_patches (memory: 64 bytes a render patch, 32 an evaluated one), raise the threshold, "
+                "raise max_patches ([render] in a scene file; memory: 64 bytes a render patch, 32 an evaluated one), raise the threshold, "
                 "or lower max_steps")
 
     def read_render_list(self, n) -> np.ndarray:
@@ -401,4 +405,4 @@ def check_budget(made: int, settings: LodSettings) -> None:
             f"the LOD stage made {made} patches by splitting in one frame, more than patch_budget="
             f"{settings.patch_budget}: every patch keeps splitting, as it does when the camera sits on a "
             "surface or an object is too far or too large for float32 to place; check the camera and the "
-            "transforms, or raise [lod] patch_budget, raise the threshold or lower max_steps")
+            "transforms, or raise patch_budget ([render] in a scene file), raise the threshold or lower max_steps")

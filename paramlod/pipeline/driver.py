@@ -23,7 +23,9 @@ from paramlod.pipeline.composite import composite
 from paramlod.pipeline.passes import SceneState
 from paramlod.pipeline.plan import check_variant, multiview_variants
 from paramlod.pipeline.settings import RenderSettings
-from paramlod.scene.scene import Scene
+from paramlod.scene.scene import Scene, SceneObject
+
+PROBE_LINES = 9   # undefined_objects: the grid of a domain probed for a finite position
 
 FLOAT32_EPS = float(np.finfo(np.float32).eps)
 
@@ -45,7 +47,7 @@ class Pipeline:
         """A Frame of ``scene`` seen by ``camera``; see ``paramlod.render``."""
         frames = self.passes(scene, camera, variant, settings, time_)
         frame = frames[0] if len(frames) == 1 else composite(frames, background=scene.background)
-        note_nothing_drawn(frame, frames, camera)
+        note_nothing_drawn(frame, frames, camera, scene=scene)
         return frame
 
     def render_views(self, scene: Scene, cameras, variant: str | None = None,
@@ -195,7 +197,28 @@ def view_stats(stats: dict, view: int, n_views: int, counts: dict, ss: int) -> d
     return out
 
 
-def note_nothing_drawn(frame, frames, camera, others_drew: bool = False) -> None:
+def undefined_objects(scene: Scene) -> list[str]:
+    """The names of the parametric objects whose function (with the object's parameters, its first
+    instance's where they vary) has no finite position on a PROBE_LINES x PROBE_LINES grid of
+    its domain: the LOD stage culls their patches, which would read as objects out of view."""
+    out = []
+    for o in scene.objects:
+        if not isinstance(o, SceneObject):
+            continue
+        fn = o.function
+        uu, vv = np.meshgrid(np.linspace(*fn.u_range, PROBE_LINES), np.linspace(*fn.v_range, PROBE_LINES))
+        params = {**o.params, **{k: np.asarray(a)[0] for k, a in o.per_instance.items()}}
+        try:
+            with np.errstate(all="ignore"):
+                p = fn.evaluate(uu, vv, **params)
+        except Exception:   # noqa: BLE001 - a diagnosis only: an object it cannot evaluate is not named
+            continue
+        if not np.isfinite(p).all(axis=-1).any():
+            out.append(f"'{fn.name}'")
+    return out
+
+
+def note_nothing_drawn(frame, frames, camera, others_drew: bool = False, scene: Scene | None = None) -> None:
     """``stats["nothing_drawn"]``: None, or why a frame covers no pixel (also in ``warnings``), so
     an empty image is never taken for a render (objects at 1e10 gave one with exit code 0).
     ``others_drew``: a view of a multi-view frame whose other views drew (a cube face looking away
@@ -217,6 +240,11 @@ def note_nothing_drawn(frame, frames, camera, others_drew: bool = False) -> None
             reason = (f"nothing drawn: the camera is {far_off:.3g} from the origin, where float32's steps "
                       f"({step:.3g}) are larger than a pixel at depth {depth:.3g} ({pixel:.3g}); move the scene "
                       "and the camera nearer the origin")
+        elif patches == 0 and culled and scene is not None and (bad := undefined_objects(scene)) \
+                and len(bad) == sum(isinstance(o, SceneObject) for o in scene.objects):
+            reason = (f"nothing drawn: {', '.join(bad)} evaluates to NaN or infinity everywhere on a "
+                      f"{PROBE_LINES} x {PROBE_LINES} grid of its domain, and the LOD stage culls such patches "
+                      "(check the formula: a square root or logarithm of a negative number, a division by zero)")
         elif patches == 0 and culled:
             reason = (f"nothing drawn: the LOD stage culled every patch ({culled}), every object lies outside "
                       "the camera's view (check the camera's eye, target, near and far)")

@@ -65,7 +65,10 @@ def framing_camera(scene, direction=(0.6, 0.45, 1.0), up=(0, 1, 0), fov_y=40.0, 
     centre = (lo + hi) / 2
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]) - centre
     d = np.asarray(direction, float)
-    d /= np.linalg.norm(d)
+    length = float(np.linalg.norm(d)) if d.shape == (3,) else 0.0
+    if not (np.isfinite(length) and length > 0):
+        raise SceneError(f"framing camera: direction must be a finite non-zero vector [x, y, z], got {direction!r}")
+    d /= length
     probe = Camera.look_at(centre + d, centre, up, fov_y, size)   # only for its axes
     right, upv = probe.view[0, :3], probe.view[1, :3]
     w, h = size

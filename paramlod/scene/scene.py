@@ -29,7 +29,7 @@ from paramlod.scene.loaders import load
 from paramlod.scene.meshes import source_key, source_label
 from paramlod.core.color import srgb_to_linear
 from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
-from paramlod.core.transforms import PLACE_LIMIT, check_transform, check_values, matrix as _as_matrix
+from paramlod.core.transforms import MIN_SCALE, PLACE_LIMIT, check_transform, check_values, matrix as _as_matrix
 
 # Per-instance float record (paramlod.core.layouts.INSTANCE_F, INST_* in the kernels' prelude):
 # 4x4 model matrix (row-major), 3x4 normal matrix rows, domain (u0, u1, v0, v1).
@@ -53,10 +53,14 @@ class Material:
     def __post_init__(self):
         if not isinstance(self.two_sided, (bool, np.bool_)):
             raise SceneError(f"material two_sided must be true or false, got {self.two_sided!r}")
-        c = np.asarray(self.color, dtype=np.float64)
+        try:
+            c = np.asarray(self.color, dtype=np.float64)
+        except (TypeError, ValueError):
+            c = np.full(0, np.nan)
         if c.shape != (3,) or not np.all((c >= 0) & (c <= 1)):
             raise SceneError(f"material color must be three numbers in [0, 1], got {self.color!r}")
-        if not 0 <= self.specular <= 1:
+        if isinstance(self.specular, bool) or not isinstance(self.specular, (int, float, np.integer, np.floating)) \
+                or not 0 <= self.specular <= 1:
             raise SceneError(f"material specular must be in [0, 1], got {self.specular!r}")
         self.color = tuple(float(x) for x in c)
 
@@ -482,8 +486,12 @@ class Scene:
                 raise SceneError(f"'{fn.name}': instance {k}'s transform places it beyond {PLACE_LIMIT:.0e}, "
                                  "where float32 cannot place geometry")
             lin = models[:, :3, :3]
-            if np.any(np.abs(np.linalg.det(lin)) < 1e-20):
-                raise SceneError(f"'{fn.name}': an instance transform is singular")
+            det = np.abs(np.linalg.det(lin))
+            if np.any(det < MIN_SCALE ** 3):   # the limit check_transform puts on each factor
+                k = int(np.argmin(det))
+                raise SceneError(f"'{fn.name}': instance {k}'s transform (its parts' and instances' transforms "
+                                 f"multiplied) must be invertible with a scale above {MIN_SCALE:.0e} (its 3x3 part "
+                                 f"has determinant {float(det[k]):.3g})")
             nrm = np.transpose(np.linalg.inv(lin), (0, 2, 1))
             f[:, 16:28] = np.concatenate([nrm, np.zeros((n, 3, 1))], axis=2).reshape(n, 12)
             f[:, 28:32] = [*fn.u_range, *fn.v_range]

@@ -102,7 +102,18 @@ def test_scene_names_the_object_and_field_of_a_bad_transform():
         s.add_instances("sphere", 3, transforms=many, transform=pl.translate(0, 0, 0.9 * PLACE_LIMIT))
     with pytest.raises(pl.SceneError, match="add_surfels: transform must be finite"):
         s.add_surfels("unused.surfels", transform=np.full((4, 4), np.nan))
+    # the renderers apply the top three rows: a projective bottom row was silently ignored
+    projective = np.eye(4)
+    projective[3] = (0, 0, 1, 0)
+    with pytest.raises(pl.SceneError, match=r"'sphere': transform must be affine: its bottom row must be "
+                                            r"\[0, 0, 0, 1\], got \[0., 0., 1., 0.\]"):
+        s.add("sphere", transform=projective)
+    many = np.tile(np.eye(4), (3, 1, 1))
+    many[2, 3, 3] = 2.0
+    with pytest.raises(pl.SceneError, match=r"'sphere': transforms \[2\] must be affine"):
+        s.add_instances("sphere", 3, transforms=many)
     assert s.object_count == 0
+    s.add("sphere", transform=pl.rotate(30, (1, 1, 0)) @ pl.translate(1, 2, 3) @ pl.scale(0.3))   # products stay affine
 
 
 def test_parameters_beyond_float32_are_refused():
@@ -141,6 +152,19 @@ def test_a_frame_that_draws_nothing_says_why(variant):
     assert f.stats["pixels_written"] == 0
     assert "culled every patch" in f.stats["nothing_drawn"]
     assert f.stats["nothing_drawn"] in f.stats["warnings"]
+
+    # a function that is NaN everywhere (its patches culled too) is named, not taken for out of view
+    import sympy as sp
+
+    @pl.parametric(u=(0, 1), v=(0, 1), name=f"sqrt_negative_{variant}")
+    def undefined(u, v):
+        return sp.sqrt(-1 - u), v, u
+
+    nan = pl.Scene()
+    nan.add(undefined)
+    f = pl.render(nan, pl.Camera.look_at((0.5, 0.5, 3), (0.5, 0.5, 0), size=SIZE), variant=variant)
+    assert f.stats["pixels_written"] == 0
+    assert f.stats["nothing_drawn"].startswith(f"nothing drawn: 'sqrt_negative_{variant}' evaluates to NaN")
 
     # framed from 1e10 away the sphere is in view in float64, and a float32 blur on the device
     far = pl.Scene()

@@ -393,3 +393,8 @@ def test_glyphs_command_renders_an_sh_volume_and_names_bad_files(tmp_path, capsy
     bad.write_bytes(b"not a nifti")
     assert main(["glyphs", str(bad), "-o", str(tmp_path / "x.png")]) == 2
     assert str(bad) in capsys.readouterr().err
+    # a field .npz is stored sampled: the volume's options were ignored (every glyph drawn)
+    npz = str(Path(__file__).resolve().parents[2] / "gallery" / "data" / "small64d_csa_o8.npz")
+    assert main(["glyphs", npz, "--stride", "2", "--slice", "3", "-o", str(tmp_path / "n.png")]) == 2
+    assert "--stride, --slice apply to NIfTI SH volumes" in capsys.readouterr().err
+    assert not (tmp_path / "n.png").exists()

@@ -66,7 +66,7 @@ def test_a_view_where_everything_splits_stops_soon_in_every_variant(variant):
     rs.lod = LodSettings(threshold=(1e-3, 1e-3), max_steps=12, patch_budget=20000)
     with pytest.raises(pl.CapacityError, match="patch_budget=20000") as exc:
         pl.render(scene, cam, variant=variant, settings=rs)
-    assert "raise [lod] patch_budget" in str(exc.value)
+    assert "raise patch_budget ([render] in a scene file)" in str(exc.value)
     # stopped within a few grown stages of the budget, not after the whole 4^11 split
     made = int(re.search(r"made (\d+) patches", str(exc.value)).group(1))
     assert 20000 < made < 64 * 20000

@@ -51,6 +51,26 @@ def test_bad_parameters_are_named():
         s.add_instances("sphere", 3, per_instance={"radius": [1, 2]})
     with pytest.raises(pl.FunctionError, match="not finite"):
         s.add("sphere", params={"radius": float("nan")})
+    for bad in ("a", None):   # were raw TypeError / ValueError from numpy
+        with pytest.raises(pl.SceneError, match="material specular must be in"):
+            pl.Material(specular=bad)
+        with pytest.raises(pl.SceneError, match="material color must be three numbers"):
+            pl.Material(color=(1, bad, 0))
+
+
+def test_lod_threshold_takes_one_number_or_two():
+    """The Python API takes a single threshold as a scene file does (it was a raw TypeError)."""
+    s = pl.Scene()
+    s.add("sphere")
+    cam = pl.Camera.look_at((0, 0, 4), (0, 0, 0), size=(32, 24))
+    one, two = pl.RenderSettings(), pl.RenderSettings()
+    one.lod.threshold, two.lod.threshold = 40, (40.0, 40.0)
+    np.testing.assert_array_equal(pl.render(s, cam, settings=one).color, pl.render(s, cam, settings=two).color)
+    assert one.lod.threshold == (40.0, 40.0)
+    for bad in ("55", (1, 2, 3), (0, 5), True):
+        one.lod.threshold = bad
+        with pytest.raises(pl.SceneError, match="lod threshold must be positive pixels, one number or two"):
+            pl.render(s, cam, settings=one)
 
 
 SCENE = """
@@ -101,6 +121,20 @@ def test_scene_file_chord_levels_and_tessellator(tmp_path):
     assert load_scene(p).settings.tess.inner_measure == "segment"
 
 
+def test_every_objects_variant_with_aa_is_the_frames(tmp_path):
+    """objects' variant = "tess:4xSS" when no object differs: the frame is drawn by tess in 4xSS (it
+    was refused as an unknown variant unless another object used another variant)."""
+    p = tmp_path / "s.toml"
+    p.write_text(SCENE + 'variant = "tess:4xSS"\n')
+    sf = load_scene(p)
+    assert (sf.variant, sf.settings.tess.aa, sf.object_variants) == ("tess", "4xSS", None)
+    f = pl.render(sf.scene, sf.camera, variant=sf.variant, settings=sf.settings)
+    assert f.stats["aa_effective"] == "4xSS" and f.coverage.sum() > 200
+    p.write_text(SCENE + 'variant = "tess:5xSS"\n')
+    with pytest.raises(pl.SceneError, match=r"s.toml:\d+: objects\[0\].variant: anti-aliasing mode .5xSS."):
+        load_scene(p)
+
+
 @pytest.mark.parametrize("text,expect", [
     (SCENE.replace("threshold = 60", 'threshold = 60\ntessellator = "cpu"'), r"render.tessellator: tess tessellator must"),
     (SCENE.replace("threshold = 60", 'threshold = 60\ninner_measure = "max"'), r"render.inner_measure: tess inner_measure"),
@@ -116,6 +150,8 @@ def test_scene_file_chord_levels_and_tessellator(tmp_path):
     (SCENE.replace("size = [64, 48]", "size = [64]"), r"s.toml:4: camera.size"),
     (SCENE.replace("color = [1.0, 0.5, 0.2]", "colour = [1.0, 0.5, 0.2]"), r"s.toml:11: objects\[0\].colour: unknown field"),
     (SCENE.replace("[camera]", "[camera"), r"not valid TOML"),
+    (SCENE + "scale = -1\n", r"s.toml:12: objects\[0\].scale: a single scale must be a number > 0"),
+    (SCENE.replace("eye = [0, 0, 4]", "direction = [0, 0, 0]"), r"direction must be a finite non-zero vector"),
 ])
 def test_malformed_scene_files_name_field_and_line(tmp_path, text, expect):
     p = tmp_path / "s.toml"
