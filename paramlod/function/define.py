@@ -201,6 +201,8 @@ class ParametricFunction:
         out = []
         for p in self.params:
             val = values.get(p.name, p.default)
+            if np.asarray(val).dtype.kind in "bSU":   # numpy would take "1" and True as numbers
+                raise FunctionError(f"function '{self.name}': parameter '{p.name}' must be numbers, got {val!r}")
             arr = np.asarray(val, dtype=np.float64)
             if arr.shape != p.default.shape:
                 want = "a number" if not p.is_array else f"{p.size} numbers"

@@ -84,7 +84,7 @@ class Pipeline:
             raise SceneError("the scene has no objects; add one with scene.add(...), scene.add_mesh(...) or "
                              "scene.add_surfels(...)")
         if time_ is not None:
-            scene.time = float(time_)
+            scene.time = time_
         settings = settings or RenderSettings()
         settings.points.validate()
         st = self.state(scene)

@@ -177,9 +177,21 @@ class Scene:
         self.meshes: list[MeshObject] = []
         self._loaded_meshes: dict = {}   # (source key, lod) -> (the source, kept alive; its MeshLod)
         self.background = tuple(float(x) for x in background)
-        self.time = float(time)
+        self.time = time
         self._version = next(_versions)
         self._cache = None
+
+    @property
+    def time(self) -> float:
+        """The scene's time: the implicit parameter ``t`` of functions that take one, and skinned poses."""
+        return self._time
+
+    @time.setter
+    def time(self, value):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(value):
+            raise SceneError(f"scene time must be a finite number, got {value!r}")
+        self._time = float(value)
 
     def add(self, fn_or_name, params: dict | None = None, transform=None, material: Material | None = None,
             variant: str | None = None, aa: str | None = None) -> SceneObject:

@@ -51,6 +51,14 @@ def test_bad_parameters_are_named():
         s.add_instances("sphere", 3, per_instance={"radius": [1, 2]})
     with pytest.raises(pl.FunctionError, match="not finite"):
         s.add("sphere", params={"radius": float("nan")})
+    s.add("sphere")
+    for bad in ("1", True):   # numpy took them as numbers
+        with pytest.raises(pl.FunctionError, match="parameter 'radius' must be numbers"):
+            s.add("sphere", params={"radius": bad})
+        with pytest.raises(pl.SceneError, match="scene time must be a finite number"):
+            pl.Scene(time=bad)
+    with pytest.raises(pl.SceneError, match="scene time must be a finite number, got nan"):
+        pl.render(s, pl.Camera.look_at((0, 0, 4), (0, 0, 0), size=(16, 12)), time=float("nan"))
     for bad in ("a", None):   # were raw TypeError / ValueError from numpy
         with pytest.raises(pl.SceneError, match="material specular must be in"):
             pl.Material(specular=bad)
