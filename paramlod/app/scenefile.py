@@ -46,6 +46,7 @@ NOT_FOR = {"surfels": {"params", "instances", "variant"}, "sh_field": {"params",
 SH_FIELD_KEYS = {"scale", "normalize", "color_by", "subtract_min"}   # ShField.to_scene's, with path
 MESH_LODS = ("dag", "full", "chain")
 ANIMATION_KEYS = {"frames", "t0", "t1", "fps"}
+META_KEYS = {"title", "caption", "needs", "prepare"}   # needs, prepare: paramlod.app.gallery
 TRUST_ENV = "PARAMLOD_TRUST_SCENE"   # "1": scene files may import and run any module:function (a builder)
 
 
@@ -308,6 +309,12 @@ def load_scene(path, size=None) -> SceneFile:
     meta = data.get("meta", {})
     if not isinstance(meta, dict):
         ck.fail("meta", "must be a table [meta] (title, caption)", "meta")
+    ck.unknown(meta, META_KEYS, "meta", "meta")
+    for key in ("title", "caption", "prepare"):
+        if key in meta and not isinstance(meta[key], str):
+            ck.fail(f"meta.{key}", f"must be a string, got {meta[key]!r}", "meta", None, key)
+    if "needs" in meta and not (isinstance(meta["needs"], list) and all(isinstance(n, str) for n in meta["needs"])):
+        ck.fail("meta.needs", f"must be a list of file names, got {meta['needs']!r}", "meta", None, "needs")
     anim = data.get("animation")
     if anim is not None:
         ck.unknown(anim, ANIMATION_KEYS, "animation", "animation")

@@ -158,6 +158,8 @@ def test_every_objects_variant_with_aa_is_the_frames(tmp_path):
     (SCENE.replace("size = [64, 48]", "size = [64]"), r"s.toml:4: camera.size"),
     (SCENE.replace("color = [1.0, 0.5, 0.2]", "colour = [1.0, 0.5, 0.2]"), r"s.toml:11: objects\[0\].colour: unknown field"),
     (SCENE.replace("[camera]", "[camera"), r"not valid TOML"),
+    (SCENE.replace("[camera]", "[meta]\ntitle = 3\n\n[camera]"), r"s.toml:3: meta.title: must be a string, got 3"),
+    (SCENE.replace("[camera]", "[meta]\ntitel = 'x'\n\n[camera]"), r"meta.titel: unknown field"),
     (SCENE + "scale = -1\n", r"s.toml:12: objects\[0\].scale: a single scale must be a number > 0"),
     (SCENE.replace("eye = [0, 0, 4]", "direction = [0, 0, 0]"), r"direction must be a finite non-zero vector"),
 ])
