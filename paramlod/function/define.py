@@ -515,6 +515,10 @@ class ParametricFunction:
                     f"move it to another (u, v)")
             child = _resolve(part.function, self, here)
             names = {p.name for p in child.params}
+            if set(part.params) - names:   # the child would name neither the plugin nor the part
+                raise FunctionError(f"plugin '{self.name}' ({self.where}): part {here}: function '{child.name}' has "
+                                    f"no parameter {', '.join(map(repr, sorted(set(part.params) - names)))} "
+                                    f"(its parameters: {', '.join(sorted(names)) or 'none'})")
             child_params = dict(part.params)
             for k in part.inherit:
                 if k in names and k in values and k not in child_params:
@@ -874,6 +878,9 @@ def _check_expr(fname: str, where: str, e, allowed: set, what: str) -> sp.Expr:
     if e.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
         raise FunctionError(f"plugin '{fname}' ({where}): {what} is infinite or undefined "
                             f"(a division by zero?): {e}"[:400])
+    if e.has(sp.I):   # the generated code is real: it would fail to compile, far from the plugin
+        raise FunctionError(f"plugin '{fname}' ({where}): {what} is complex (it holds the imaginary unit I; "
+                            f"a square root of a negative constant?): {e}"[:400])
     stray = e.free_symbols - allowed
     if stray:
         raise FunctionError(f"plugin '{fname}' ({where}): {what} uses unknown symbol(s) "

@@ -73,6 +73,9 @@ def load_plugin_file(path: Path, skip: set[int] = frozenset()) -> list[Parametri
     except SyntaxError as exc:
         sys.modules.pop(modname, None)
         raise FunctionError(f"plugin file {path}:{exc.lineno}: syntax error: {exc.msg}") from None
+    except SystemExit as exc:   # would end paramlod without a word
+        sys.modules.pop(modname, None)
+        raise FunctionError(f"plugin file {path} called sys.exit({exc.code!r}) while being imported") from None
     except Exception as exc:
         sys.modules.pop(modname, None)
         line = _failing_line(exc, str(path))

@@ -10,7 +10,7 @@ import pytest
 import sympy as sp
 
 import paramlod as pl
-from paramlod.function import registry
+from paramlod.function import plugins, registry
 from paramlod import Part
 
 HERE = Path(__file__).resolve().parent
@@ -162,6 +162,19 @@ def test_return_values_that_are_not_three_expressions():
             return u, v, sp.Integer(1) / 0
     expect_error(r"plugin 'infinite'.*component z is infinite or undefined", division_by_zero)
 
+    def complex_value():   # failed only when the OpenCL code was compiled
+        @pl.parametric()
+        def imaginary(u, v):
+            return u + sp.sqrt(-2), v, u
+    expect_error(r"plugin 'imaginary'.*component x is complex \(it holds the imaginary unit I", complex_value)
+
+
+def test_a_plugin_file_that_exits_is_an_error(tmp_path):
+    """A plugin whose top level calls sys.exit ended paramlod silently with its exit code."""
+    (tmp_path / "quits.py").write_text("import sys\nsys.exit(3)\n")
+    with pytest.raises(pl.FunctionError, match=r"plugin file .*quits.py called sys.exit\(3\) while being imported"):
+        plugins.load_plugin_file(tmp_path / "quits.py")
+
 
 def test_empty_and_reversed_domains():
     def empty():
@@ -255,6 +268,13 @@ def test_part_errors():
         def typo(u, v):
             return u, v, 0
     expect_error(r"plugin 'typo'.*parts\[0\] \(cone\).*no parameter 'hight'", bad_params)
+
+    @pl.parametric(parts=[Part("sphere", at=(0.5, 0.5), params={"radiuz": 1})])   # resolved when placed
+    def typo_by_name(u, v):
+        return u, v, 0
+    with pytest.raises(pl.FunctionError, match=r"plugin 'typo_by_name'.*part typo_by_name/sphere\[0\]: function "
+                                               r"'sphere' has no parameter 'radiuz'"):
+        typo_by_name.expand_parts()
 
     @pl.parametric(parts=[Part("sphere", at=(0.0, 0.0))])
     def tip(u, v):
