@@ -35,7 +35,15 @@ def _finite_time(text: str) -> float:
     return t
 
 
+def _named(text: str) -> str:
+    # an empty --variant or --aa would be taken as not given, and the scene's own used instead
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must not be empty")
+    return text
+
+
 def cmd_render(args) -> int:
+    views_cmd.check(args)
     if views_cmd.requested(args):
         if _render_job_requested(args):
             raise ParamlodError("--stereo, --cubemap and --quilt render one multi-view frame of one scene; "
@@ -145,10 +153,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "(also {time}, {angle}, {scene}), e.g. out/frame_{frame:04d}.png; default "
                         "out/<scene>.png, or out/<scene>_{frame:04d}.png for a job")
     add_size(r, what="override the camera size")
-    r.add_argument("--variant", help="override the render variant: points, points-ssaa or tess (meshes follow: "
+    r.add_argument("--variant", type=_named,
+                   help="override the render variant: points, points-ssaa or tess (meshes follow: "
                    "meshlets, or meshlets-gl with tess), or meshlets / meshlets-gl for the meshes")
-    r.add_argument("--aa", help="anti-aliasing: noAA, msaa2/4/8, ssaa2x2/3x3/4x4, or a combination such "
-                                "as 4xSS+8xMS (tess); the points variant takes the supersampling only")
+    r.add_argument("--aa", type=_named, help="anti-aliasing: noAA, msaa2/4/8, ssaa2x2/3x3/4x4, or a combination such "
+                                             "as 4xSS+8xMS (tess); the points variant takes the supersampling only")
     add_stats(r)
     r.add_argument("--time", type=_finite_time, metavar="T",
                    help="scene time of the frame (the implicit parameter t of animated functions; default 0)")

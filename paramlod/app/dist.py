@@ -19,9 +19,12 @@ from __future__ import annotations
 
 import argparse
 import glob
+import json
 import logging
 import math
 import os
+import re
+import subprocess
 import sys
 import time
 import tomllib
@@ -33,7 +36,7 @@ from typing import Callable
 
 import numpy as np
 
-from paramlod.app.args import check_folder, parse_size, positive_int
+from paramlod.app.args import check_folder, non_negative_int, parse_size, positive_int
 from paramlod.app.scenefile import load_scene
 from paramlod.core.camera import Camera
 from paramlod.core.files import write_atomically
@@ -49,6 +52,11 @@ DEFAULT_FPS = 24.0
 DEFAULT_RETRIES = 2
 IMAGE_SUFFIXES = (".png", ".exr")
 VIDEO_SUFFIXES = (".gif", ".mp4")
+# every task of a job and its output names are made (about 1 KB each) before the first task runs
+MAX_JOB_TASKS = 100_000
+WORKERS_PER_CORE = 4   # --workers: more local processes than this only add start-up time and memory
+# what str.format raises for a bad name pattern ({frmae}, {frame[0]}, {frame.x}, {frame:q})
+PATTERN_ERRORS = (KeyError, IndexError, TypeError, AttributeError, ValueError)
 
 
 # --- the job model ---------------------------------------------------------------------------------
@@ -210,18 +218,55 @@ def _gpus(text: str) -> str:
     raise argparse.ArgumentTypeError(f"must be 'all' or GPU indices such as 0,1 (see `paramlod info`), got {text!r}")
 
 
+def _local_workers(text: str) -> int:
+    n, most = positive_int(text), WORKERS_PER_CORE * _cores()
+    if n > most:   # hundreds of local workers only start slowly (or never) and fill the memory
+        raise argparse.ArgumentTypeError(f"at most {most} local workers ({WORKERS_PER_CORE} per CPU core, "
+                                         f"{_cores()} here), got {n}: more only add start-up time and memory")
+    return n
+
+
+def _scheduler(text: str) -> str:
+    """A scheduler file (.json, as ``dask scheduler --scheduler-file`` writes) whose address is
+    readable, or an address with a port: checked here, since Dask fails late and with a bare
+    ValueError or AssertionError."""
+    address = text
+    if text.endswith(".json"):   # _Cluster reads such a name as a scheduler file
+        try:
+            data = json.loads(Path(text).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise argparse.ArgumentTypeError(f"scheduler file {text} does not exist") from None
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            raise argparse.ArgumentTypeError(f"cannot read the scheduler file {text} ({exc})") from None
+        address = data.get("address") if isinstance(data, dict) else None
+        if not isinstance(address, str):
+            raise argparse.ArgumentTypeError(f"{text} is not a Dask scheduler file (no \"address\"; "
+                                             "`dask scheduler --scheduler-file FILE` writes one)")
+    try:
+        from distributed.comm.addressing import get_address_host_port
+    except ImportError:
+        return text   # _Cluster says that Dask is needed
+    try:
+        get_address_host_port(address)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{address!r} is not a Dask scheduler address ({exc}); give "
+                                         "tcp://HOST:PORT or a scheduler file (.json)") from None
+    return text
+
+
 def add_job_options(parser):
     """``--workers N | --gpus all | --scheduler ADDRESS``, ``--retries``, ``--overwrite``."""
     g = parser.add_argument_group("where the job runs (default: in this process, one task after the other)")
     m = g.add_mutually_exclusive_group()
-    m.add_argument("--workers", type=positive_int, metavar="N",
-                   help="a local Dask cluster of N worker processes (one task at a time each)")
+    m.add_argument("--workers", type=_local_workers, metavar="N",
+                   help=f"a local Dask cluster of N worker processes (one task at a time each; at most "
+                        f"{WORKERS_PER_CORE} per CPU core)")
     m.add_argument("--gpus", type=_gpus, metavar="all|I,J",
                    help="a local Dask cluster of one worker per OpenCL GPU, each pinned to its GPU")
-    m.add_argument("--scheduler", metavar="ADDRESS",
+    m.add_argument("--scheduler", type=_scheduler, metavar="ADDRESS",
                    help="an existing Dask cluster: its address (tcp://login1:8786) or scheduler file (.json); "
                         "docs/scale-out.md shows SLURM")
-    g.add_argument("--retries", type=int, default=DEFAULT_RETRIES, metavar="N",
+    g.add_argument("--retries", type=non_negative_int, default=DEFAULT_RETRIES, metavar="N",
                    help=f"run a task again up to N times after its worker died (default {DEFAULT_RETRIES})")
     g.add_argument("--overwrite", action="store_true",
                    help="make every output again (default: skip outputs that exist and are valid)")
@@ -480,9 +525,16 @@ def expand_range(spec, total: int | None, what: str = "frames") -> list[int]:
     if spec == "all":
         if total is None:
             raise ParamlodError(f"--{what} all: nothing says how many there are; give --{what} A:B")
-        return list(range(total))
-    a, b, s = spec
-    return list(range(a, b, s))
+        indices = range(total)
+    else:
+        indices = range(*spec)
+    if len(indices) > MAX_JOB_TASKS:
+        given = spec if spec == "all" else f"{indices.start}:{indices.stop}" + (
+            f":{indices.step}" if indices.step > 1 else "")
+        raise ParamlodError(f"--{what} {given}: {len(indices)} {what}; one job takes at most {MAX_JOB_TASKS} (every "
+                            f"task and output name is made before the first runs): split it into several jobs of "
+                            f"--{what} A:B")
+    return list(indices)
 
 
 def format_outputs(patterns, what: str, items: list[dict], suffixes=IMAGE_SUFFIXES,
@@ -499,7 +551,7 @@ def format_outputs(patterns, what: str, items: list[dict], suffixes=IMAGE_SUFFIX
         for p in patterns:
             try:
                 name = str(Path(p.format(**it)).expanduser().resolve())
-            except (KeyError, IndexError, ValueError, AttributeError) as exc:
+            except PATTERN_ERRORS as exc:
                 raise ParamlodError(f"-o {p}: not a usable name pattern ({type(exc).__name__}: {exc}); the fields "
                                     f"are {fields}, e.g. {example}{suffixes[0]}") from None
             if name in seen:
@@ -773,7 +825,11 @@ def load_camera_path(path, default_up=(0.0, 1.0, 0.0), default_fov: float = 45.0
 
 def _camera_path(file, fov_y: float) -> CameraPath:
     path = Path(file)
-    key = (str(path), path.stat().st_mtime_ns, fov_y)
+    try:
+        mtime = path.stat().st_mtime_ns
+    except OSError:
+        mtime = None   # load_camera_path reports the missing file
+    key = (str(path), mtime, fov_y)
     cp = _STATE["paths"].get(key)
     if cp is None:   # keys without fov_y take the scene camera's
         cp = _STATE["paths"][key] = load_camera_path(path, default_fov=fov_y)
@@ -834,8 +890,8 @@ def render_job(scenes, outputs=None, frames=None, fps: float | None = None, turn
     scenes = [Path(s) for s in scenes]
     if turntable is not None and camera_path:
         raise ParamlodError("--turntable and --camera-path both set the camera; give one of them")
-    if turntable is not None and turntable < 1:
-        raise ParamlodError(f"--turntable N needs N >= 1 frames, got {turntable}")
+    if turntable is not None and not 1 <= turntable <= MAX_JOB_TASKS:   # the orbit is framed at every angle
+        raise ParamlodError(f"--turntable N needs 1 <= N <= {MAX_JOB_TASKS} frames, got {turntable}")
     if fps is not None and not (math.isfinite(fps) and fps > 0):
         raise ParamlodError(f"--fps must be a number > 0, got {fps}")
     if video is not None:
@@ -844,6 +900,12 @@ def render_job(scenes, outputs=None, frames=None, fps: float | None = None, turn
         if len(scenes) > 1 and "{scene" not in video:
             raise ParamlodError(f"--video {video}: {len(scenes)} scenes need one video each: put {{scene}} in "
                                 "the name, e.g. out/{scene}.gif")
+        for scene in scenes:
+            try:
+                video.format(scene=scene.stem)
+            except PATTERN_ERRORS as exc:
+                raise ParamlodError(f"--video {video}: not a usable name pattern ({type(exc).__name__}: {exc}); "
+                                    "the field is {scene}, e.g. out/{scene}.gif") from None
     if outputs is None:
         many = (frames is not None) or turntable or camera_path
         stem = "{scene}_{frame:04d}.png" if many else "{scene}.png"
@@ -894,11 +956,7 @@ def render_job(scenes, outputs=None, frames=None, fps: float | None = None, turn
 
 
 def write_video(path, frames, fps: float) -> Path:
-    """An animated GIF (looping) or an MP4 (H.264, imageio-ffmpeg) of PNG files, atomically."""
-    try:
-        import imageio.v3 as iio
-    except ImportError:
-        raise ParamlodError(f"--video {path}: needs imageio: pip install imageio") from None
+    """An animated GIF (looping, Pillow) or an MP4 (H.264, imageio-ffmpeg's ffmpeg) of PNG files, atomically."""
     from PIL import Image
 
     imgs = []
@@ -911,19 +969,27 @@ def write_video(path, frames, fps: float) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".gif":
         ms = max(20, int(round(1000.0 / fps / 10)) * 10)   # GIF delays are hundredths of a second
-        return write_atomically(path, lambda tmp: iio.imwrite(tmp, np.stack(imgs), extension=".gif", duration=ms,
-                                                              loop=0))
+        pictures = [Image.fromarray(a) for a in imgs]
+        return write_atomically(path, lambda tmp: pictures[0].save(tmp, format="GIF", save_all=True,
+                                                                   append_images=pictures[1:], duration=ms, loop=0))
     try:
-        import imageio_ffmpeg  # noqa: F401
+        import imageio_ffmpeg
     except ImportError:
         raise ParamlodError(f"--video {path}: MP4 needs imageio-ffmpeg: pip install imageio-ffmpeg "
                             "(or write a .gif)") from None
     h, w = imgs[0].shape[:2]
     # H.264 in yuv420p needs even sides: pad by repeating the last row/column
     padded = np.stack([np.pad(a, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge") for a in imgs])
-    return write_atomically(path, lambda tmp: iio.imwrite(tmp, padded, extension=".mp4", plugin="FFMPEG", fps=fps,
-                                                          codec="libx264", macro_block_size=1,
-                                                          pixelformat="yuv420p"))
+
+    def encode(tmp):   # ffmpeg run here, its messages kept: through imageio they flooded the terminal
+        done = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-v", "error", "-f", "rawvideo",
+                               "-pix_fmt", "rgb24", "-s", f"{padded.shape[2]}x{padded.shape[1]}", "-r", f"{fps:g}",
+                               "-i", "-", "-an", "-vcodec", "libx264", "-pix_fmt", "yuv420p", "-f", "mp4", str(tmp)],
+                              input=padded.tobytes(), capture_output=True)
+        if done.returncode:   # its first message is the cause, without ffmpeg's "[out#0/mp4 @ 0x...]" tag
+            lines = done.stderr.decode(errors="replace").strip().splitlines() or [f"exit status {done.returncode}"]
+            raise OSError("ffmpeg failed: " + re.sub(r"^\[[^]]*\] *", "", lines[0]))
+    return write_atomically(path, encode)
 
 
 # --- mesh builds of many files ---------------------------------------------------------------------
@@ -955,7 +1021,7 @@ def mesh_build_job(paths, out: str = "{stem}" + MESHLOD_SUFFIX, lod: str = "dag"
             raise MeshError(f"{p} is already a {MESHLOD_SUFFIX} file; give the mesh file it was built from")
         try:
             name = out.format(stem=p.name.split(".")[0], name=p.name)
-        except (KeyError, IndexError, ValueError) as exc:
+        except PATTERN_ERRORS as exc:
             raise MeshError(f"-o {out}: not a usable name pattern ({exc}); the fields are {{stem}} and {{name}}") from None
         target = Path(name) if Path(name).is_absolute() else p.parent / name
         if not target.name.lower().endswith(MESHLOD_SUFFIX):
@@ -1052,11 +1118,9 @@ def add_bench_arguments(p):
 
 
 def run_bench_scaling(args) -> int:
-    import json
-
     try:
         size = parse_size(args.size) if isinstance(args.size, str) else args.size
-        counts = tuple(positive_int(x) for x in str(args.workers).split(","))
+        counts = tuple(_local_workers(x) for x in str(args.workers).split(","))
     except argparse.ArgumentTypeError as exc:
         raise ParamlodError(f"bench-scale: {exc}") from None
     res = bench_scaling(args.scene, args.frames, size, counts, args.threads, args.gpus, progress=True)

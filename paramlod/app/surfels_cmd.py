@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 from dataclasses import dataclass
@@ -19,6 +20,17 @@ from paramlod.surfels.build.sampler import sample
 from paramlod.surfels.build.schedule import auto_resolution
 from paramlod.surfels.format import SurfelSet
 from paramlod.surfels.render import FixedCount, FixedSize, default_camera, render_surfels, up_axis
+
+
+def _fov(text: str) -> float:
+    # checked here: a bad fov otherwise surfaces as the default camera's non-finite eye
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0 < v < 180:
+        raise argparse.ArgumentTypeError(f"must be a number of degrees in (0, 180), got {text!r}")
+    return v
 
 
 def _check_output(path: Path):
@@ -186,7 +198,7 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
     r.add_argument("--target", type=parse_vec3, help="camera target x,y,z (default: the set's centre)")
     r.add_argument("--up", type=parse_vec3, help="camera up vector (default: the set's up axis, opposite the flat base "
                                                    "it rests on, else 0,1,0; the view is a 3/4 view of its widest side)")
-    r.add_argument("--fov", type=float, default=35.0, help="vertical field of view in degrees (default 35)")
+    r.add_argument("--fov", type=_fov, default=35.0, help="vertical field of view in degrees (default 35)")
     add_stats(r)
     r.set_defaults(func=cmd_render)
 

@@ -19,6 +19,8 @@ from paramlod.errors import ParamlodError, SceneError
 from paramlod.pipeline.driver import render_views
 from paramlod.scene.framing import scene_box
 
+DEFAULT_VIEW_CONE = 40.0   # degrees; applied late, so that None tells that --view-cone was not given
+
 
 def _grid(text: str) -> tuple[int, int]:
     try:
@@ -36,12 +38,20 @@ def add_arguments(r) -> None:
                    help="six 90-degree views from the camera's eye (assembled: an equirectangular panorama)")
     m.add_argument("--quilt", type=_grid, metavar="COLSxROWS",
                    help="a light-field quilt, e.g. 8x6 (Looking Glass order: view 0 bottom left)")
-    g.add_argument("--view-cone", type=positive_float, default=40.0, metavar="DEG",
-                   help="--quilt: the angle the views span, seen from the focal plane (default 40)")
+    g.add_argument("--view-cone", type=positive_float, metavar="DEG",
+                   help="--quilt: the angle the views span, seen from the focal plane "
+                        f"(default {DEFAULT_VIEW_CONE:g})")
 
 
 def requested(args) -> bool:
     return bool(args.stereo or args.cubemap or args.quilt)
+
+
+def check(args) -> None:
+    """Options that would be ignored: --view-cone shapes the quilt's views only."""
+    if args.view_cone is not None and not args.quilt:
+        raise ParamlodError(f"--view-cone {args.view_cone:g}: is the angle the views of --quilt span; "
+                            "it has no effect without --quilt")
 
 
 def _kind(args) -> str:
@@ -58,7 +68,7 @@ def cameras(args, sf) -> list:
     if args.cubemap:
         return views.cube_faces(cam.eye, size=cam.height, near=cam.near, far=cam.far)
     cols, rows = args.quilt
-    return views.quilt(cam, cols, rows, view_cone=args.view_cone, focus=focus)
+    return views.quilt(cam, cols, rows, view_cone=args.view_cone or DEFAULT_VIEW_CONE, focus=focus)
 
 
 def outputs(args, scene_path) -> list[str]:
@@ -73,7 +83,7 @@ def outputs(args, scene_path) -> list[str]:
                                 "(.png or .exr) put {view} in the name, e.g. out/view_{view:02d}.exr")
         try:
             out.format(view=0)
-        except (KeyError, IndexError, ValueError) as e:
+        except dist.PATTERN_ERRORS as e:
             raise ParamlodError(f"-o {out}: only {{view}} may be filled in ({e})") from None
     return outs
 
