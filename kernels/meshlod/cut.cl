@@ -1,7 +1,8 @@
 // Mesh LOD cut: one work-item per (instance, cluster) of a batch (the instances of one mesh over
 // that mesh's clusters: global id 0 = cluster, 1 = instance). A cluster is drawn for an instance
 // iff its group's projected error does not exceed the threshold and its parent group's does; drawn
-// clusters then meet the frustum test and, for SIMILAR instances, the backface cone. The rule and
+// clusters then meet the frustum test and, for instances flagged SIMILAR and ONE_SIDED (CUT_CONES:
+// the cone holds under the model, and the material hides back faces), the backface cone. The rule and
 // the cut camera record (CC_* offsets, passed as -D defines) are described in
 // paramlod/meshlod/cut_reference.py, the numpy twin of this file: the float32 operations here are
 // in the twin's order (no contraction, exact division and sqrt), so both select the same pairs.
@@ -85,10 +86,10 @@ inline bool cut_backfacing(float4 apex, float4 cone, __global const float* inst,
 
 // How view cc treats a cluster the LOD chose: 0 keeps it, 1 culls it by the frustum, 2 by the
 // backface cone (the one-view tests, in their order).
-inline uint cut_cull(__global const Cluster* cl, __global const float* I, float s, bool similar, uint mode,
+inline uint cut_cull(__global const Cluster* cl, __global const float* I, float s, bool cones, uint mode,
                      const float* cc) {
     if ((mode & 1u) && cut_outside(cl->sphere, I + INST_MODEL, s, cc)) return 1u;
-    if ((mode & 2u) && similar && cut_backfacing(cl->cone_apex, cl->cone, I, cc)) return 2u;
+    if ((mode & 2u) && cones && cut_backfacing(cl->cone_apex, cl->cone, I, cc)) return 2u;
     return 0u;
 }
 
@@ -123,17 +124,17 @@ void cluster_cut(__global const Cluster* clusters, uint first_cluster, uint n_cl
         if (draw && !isinf(cl->parent_error))
             draw = cut_exceeds(cl->parent_error, cl->parent_sphere, m, s, cc, cams, n_views, T);
         if (draw) {
-            bool similar = (inst_u[(size_t)inst * INST_U + INST_FLAGS] & CUT_SIMILAR) != 0u;
+            bool cones = (inst_u[(size_t)inst * INST_U + INST_FLAGS] & CUT_CONES) == CUT_CONES;
             bool all_outside;
             if (CUT_VIEWS(n_views) == 1u) {
-                uint why = cut_cull(cl, I, s, similar, mode, cc);
+                uint why = cut_cull(cl, I, s, cones, mode, cc);
                 mask = why ? 0ul : 1ul;
                 all_outside = why == 1u;
             } else {
                 all_outside = true;
                 for (uint v = 0; v < CUT_VIEWS(n_views); ++v) {
                     CutCamera cv = cut_view(cams, v);
-                    uint why = cut_cull(cl, I, s, similar, mode, cv.v);
+                    uint why = cut_cull(cl, I, s, cones, mode, cv.v);
                     if (!why) mask |= 1ul << v;
                     all_outside = all_outside && why == 1u;
                 }

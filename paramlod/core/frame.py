@@ -155,5 +155,12 @@ class Frame:
             }
             channels = {k: np.ascontiguousarray(v) for k, v in channels.items()}
             header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-            return write_atomically(path, lambda tmp: OpenEXR.File(header, channels).write(tmp))
+
+            def write(tmp):
+                try:
+                    OpenEXR.File(header, channels).write(tmp)
+                except RuntimeError as exc:   # OpenEXR's I/O errors (a full disk), which name the temporary file
+                    raise OSError(str(exc).split(f'"{tmp}". ')[-1].rstrip(".")) from None
+
+            return write_atomically(path, write)
         raise ParamlodError(f"cannot write {path}: unknown image type '{path.suffix}' (use .png or .exr)")

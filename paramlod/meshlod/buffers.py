@@ -11,7 +11,8 @@ the OpenGL draw read.
 objects (paramlod.core.layouts INSTANCE_F: model, normal matrix, domain unused; INSTANCE_U: func =
 the mesh's index in MeshArrays, params = 0, object id, flags: SIMILAR when the model's 3x3 part is
 a rotation times a uniform scale, so that backface cones stay valid, MIRRORED when its determinant
-is negative), its material (MATERIAL), and
+is negative, ONE_SIDED when its object's material has ``two_sided`` False: only such instances may
+lose clusters to the backface cone), its material (MATERIAL), and
 for each instance the largest scale of its model matrix (``scales``: errors and spheres grow by it).
 ``batches`` lists (mesh index, first instance, instance count): instances of one mesh are
 contiguous, so the cut runs once per batch over (its mesh's clusters) x (its instances).
@@ -40,7 +41,7 @@ from paramlod.errors import MeshError, SceneError
 from paramlod.meshlod.skinned import SkinnedMesh
 from paramlod.scene.handoff import mesh_weight
 
-SIMILAR, MIRRORED = 1, 2   # MeshInstances.inst_u flags
+SIMILAR, MIRRORED, ONE_SIDED = 1, 2, 4   # MeshInstances.inst_u flags
 
 
 @dataclass
@@ -119,7 +120,8 @@ class MeshInstances:
             u[:, INSTANCE_U.offset("object")] = o.object_id
             sv = np.linalg.svd(lin, compute_uv=False)
             u[:, INSTANCE_U.offset("flags")] = (np.where(sv[:, 2] >= sv[:, 0] * (1 - 1e-4), SIMILAR, 0)
-                                                | np.where(np.linalg.det(lin) < 0, MIRRORED, 0))
+                                                | np.where(np.linalg.det(lin) < 0, MIRRORED, 0)
+                                                | (0 if o.material.two_sided else ONE_SIDED))
             mat = np.tile(np.array([*o.material.color, o.material.specular], np.float32), (n, 1))
             if o.colors is not None:
                 mat[:, :3] = o.colors

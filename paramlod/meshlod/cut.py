@@ -25,7 +25,7 @@ from paramlod.device.context import cl_device
 from paramlod.device.programs import events_ms, kernel, launch
 from paramlod.errors import CapacityError, MeshError
 from paramlod.meshlod import cut_reference as ref
-from paramlod.meshlod.buffers import SIMILAR, DeviceMeshes
+from paramlod.meshlod.buffers import ONE_SIDED, SIMILAR, DeviceMeshes
 
 CUT_LOCAL = 64          # work-items per group: one local reduction and one global atomic per counter
 N_COUNTERS = 8          # ulong counters of the contract (the rest of COUNTERS' slots are spare)
@@ -36,7 +36,7 @@ EXACT = ("-cl-fp32-correctly-rounded-divide-sqrt",)   # so the numpy twin's divi
 # what both cut kernels (cut.cl, skin_cull.cl) read of the cut camera records and the counters
 COMMON_DEFINES = {"CC_PLANES": ref.CC_PLANES, "CC_FLOATS": ref.CC_FLOATS, "CUT_VIEW_COUNTERS": N_COUNTERS,
                   "CUT_MAX_VIEWS": MAX_VIEWS}
-_DEFINES = {**COMMON_DEFINES, "CUT_LOCAL": CUT_LOCAL, "CUT_SIMILAR": f"{SIMILAR}u", "CC_DEPTH": ref.CC_DEPTH,
+_DEFINES = {**COMMON_DEFINES, "CUT_LOCAL": CUT_LOCAL, "CUT_CONES": f"{SIMILAR | ONE_SIDED}u", "CC_DEPTH": ref.CC_DEPTH,
             "CC_EYE": ref.CC_EYE, "CC_K": ref.CC_K, "CC_WA": ref.CC_WA, "CC_WB": ref.CC_WB,
             "CC_NEAR": ref.CC_NEAR, "CC_T": ref.CC_T}
 

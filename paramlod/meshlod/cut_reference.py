@@ -14,8 +14,9 @@ and s_i the instance's largest scale. The nearest depth of the sphere makes it c
 child's parent test and its parents' own test read the same floats, so they never disagree.
 Then, for drawn clusters: the frustum test (bounding sphere, world centre M_i * c, radius r * s_i,
 against the six normalised world planes of P V; culled when wholly outside one), then the
-backface cone (instances flagged SIMILAR only), tested in object space against the eye brought
-there by M_i^-1 (facing is invariant under any invertible model, mirrors included):
+backface cone (instances flagged SIMILAR and ONE_SIDED only: a two-sided material shows its back
+faces), tested in object space against the eye brought there by M_i^-1 (facing is invariant
+under any invertible model, mirrors included):
 culled iff cutoff < 1 and |d| > 0 and dot(d, axis) >= cutoff * |d|, d = apex * E_w - eye_obj,
 with the eye homogeneous (E_w = 1 perspective, 0 orthographic: E is then the backward direction).
 Instances whose hand-off weight is 0 (paramlod.scene.handoff: their surfels draw every pixel) are
@@ -44,7 +45,7 @@ from paramlod.errors import MeshError
 # the counters (8 ulong on the device; the rest are spare zeros)
 COUNTERS = ("selected", "triangles", "culled_frustum", "culled_backface", "tests")
 VIEW_COUNTERS = ("clusters", "triangles")   # per view of a multi-view cut, after the 8
-SIMILAR = 1   # MeshInstances flag (paramlod.meshlod.buffers.SIMILAR; checked equal in the tests)
+SIMILAR, ONE_SIDED = 1, 4   # MeshInstances flags (paramlod.meshlod.buffers; checked equal in the tests)
 
 # the cut camera record (float32): offsets the kernel gets as -D defines (paramlod.meshlod.cut)
 CC_PLANES = 0      # 6 x (nx, ny, nz, d): world planes, inside where n . x + d >= 0, |n| = 1
@@ -200,12 +201,12 @@ def select_views(arrays, instances, cameras, threshold_px, cull_frustum=True, cu
         own = ~exceeds(cl["error"], cl["lod_sphere"], model, s, ccs, T)
         par = np.isinf(cl["parent_error"])[None, :] | exceeds(cl["parent_error"], cl["parent_sphere"], model, s, ccs, T)
         draw = own & par & live[:, None]
-        similar = (instances.inst_u[i0:i0 + ni, u_flags] & SIMILAR) != 0
+        cones = (instances.inst_u[i0:i0 + ni, u_flags] & (SIMILAR | ONE_SIDED)) == (SIMILAR | ONE_SIDED)
         mask = np.zeros(draw.shape, np.uint64)
         all_outside = np.ones(draw.shape, bool)
         for v, cc in enumerate(ccs):
             outside = _frustum_culled(cl["sphere"], model, s, cc) if cull_frustum else np.zeros(draw.shape, bool)
-            back = ~outside & similar[:, None] & _backface_culled(cl["cone_apex"], cl["cone"], model, normal, cc) \
+            back = ~outside & cones[:, None] & _backface_culled(cl["cone_apex"], cl["cone"], model, normal, cc) \
                 if cull_backface else np.zeros(draw.shape, bool)
             mask |= np.where(~outside & ~back, np.uint64(1 << v), np.uint64(0))
             all_outside &= outside

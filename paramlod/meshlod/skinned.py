@@ -362,7 +362,7 @@ class _Gltf:
 
         self.path, self.where = path, f"skinned mesh '{path.name}'"
         if not path.is_file():
-            raise MeshError(f"{self.where}: no such file {path}")
+            raise MeshError(f"{self.where}: {path} is not a file" if path.exists() else f"{self.where}: no such file {path}")
         with open(path, "rb") as fh:
             head = fh.read(4)
         suffix = path.suffix.lower()

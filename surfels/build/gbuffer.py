@@ -132,7 +132,17 @@ class MeshRasterizer:
         self.program.release()
 
 
+# the sampler's keys are float32 squared distances between surface points: a mesh spanning more
+# than this (1.8e19) would give infinite surfel radii
+SPAN_LIMIT = float(np.sqrt(np.finfo(np.float32).max))
+
+
 def mesh_gbuffer(soup: TriangleSoup, views: int = 16, resolution: int = 512) -> GBuffer:
+    lo, hi = soup.bounds
+    span = float(np.linalg.norm(hi - lo))
+    if span > SPAN_LIMIT:
+        raise SurfelError(f"mesh '{soup.name}' spans {span:.3g}, beyond {SPAN_LIMIT:.3g} (the sampler squares "
+                          "distances in float32); scale the mesh down")
     centre, radius = soup.bounding_sphere()
     vs = make_views(centre, radius, views, resolution)
     k, n = vs.count, vs.resolution

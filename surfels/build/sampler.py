@@ -110,7 +110,7 @@ class Sampler:
         if not 0.0 < threshold <= 1.0:
             raise SurfelError(f"threshold must be in (0, 1], got {threshold}")
         self.n_valid = gbuf.check()
-        self.gbuf, self.target, self.seed, self.threshold = gbuf, target, int(seed), float(threshold)
+        self.gbuf, self.target, self.seed, self.threshold = gbuf, target, _check_seed(seed), float(threshold)
         k, h, w = gbuf.shape
         if gbuf.pixel_count >= 1 << 32:
             raise SurfelError(f"G-buffers of {gbuf.pixel_count} pixels exceed the 32-bit pixel index")
@@ -287,6 +287,13 @@ def _check_count(n) -> int:
     return ni
 
 
+def _check_seed(seed) -> int:
+    # numpy's generator refuses negative seeds with a ValueError of its own
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise SurfelError(f"seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
 def run_levels(gbuf: GBuffer, n: int, seed: int = 0, threshold: float = THRESHOLD, progress=None):
     """The coarse-to-fine sampling loop: (keys at full resolution, per-round stats, strides)."""
     strides = level_strides(gbuf.views.resolution)
@@ -323,6 +330,7 @@ def sample_gbuffer(gbuf: GBuffer, n: int, seed: int = 0, progress: bool = False,
     give the order; ``relax_iterations`` of relax.relax then even out the full set (0: the
     surfels stay on their pixels; None: relax.auto_iterations for n and the resolution)."""
     n = _check_count(n)
+    seed = _check_seed(seed)
     if not 0.0 < threshold <= 1.0:
         raise SurfelError(f"threshold must be in (0, 1], got {threshold}")
     if relax_iterations is None:
@@ -378,6 +386,7 @@ def sample_mesh(mesh, n: int, views: int = 16, resolution: int | None = None, se
     """Blue surfels of a mesh: a file path, a ``trimesh.Trimesh`` or a TriangleSoup. ``resolution``
     None: schedule.auto_resolution(n) (128 for 10k, 512 for 100k)."""
     n = _check_count(n)
+    seed = _check_seed(seed)
     resolution = auto_resolution(n) if resolution is None else resolution
     if isinstance(mesh, TriangleSoup):
         soup = mesh
@@ -392,6 +401,7 @@ def sample_scene(scene, n: int, views: int = 16, resolution: int | None = None, 
                  progress: bool = False, name: str = "scene") -> SurfelSet:
     """Blue surfels of a parametric paramlod.Scene (G-buffers from the point renderer)."""
     n = _check_count(n)
+    seed = _check_seed(seed)
     resolution = auto_resolution(n) if resolution is None else resolution
     return sample_gbuffer(scene_gbuffer(scene, views, resolution, name=name), n, seed, progress)
 
@@ -404,5 +414,6 @@ def sample(source, n: int, views: int = 16, resolution: int | None = None, seed:
         return sample_scene(source, n, views, resolution, seed, progress)
     if isinstance(source, (str, Path)) and Path(source).suffix.lower() == ".toml":
         _check_count(n)
+        _check_seed(seed)
         return sample_scene(load_scene(source).scene, n, views, resolution, seed, progress, name=Path(source).name)
     return sample_mesh(source, n, views, resolution, seed, progress)

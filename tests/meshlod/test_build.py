@@ -283,11 +283,20 @@ def test_a_disconnected_mesh_with_pruning_off_still_terminates():
     ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 1]], "repeat a vertex"),
     ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 1, 2, 3]], "triangles"),
     ([[0, 0], [1, 0], [0, 1]], [[0, 1, 2]], r"\[V, 3\]"),
+    # float32 holds 1e20, but not its square: meshoptimizer's meshlets came out empty (a numpy traceback)
+    ([[0, 0, 0], [1e20, 0, 0], [0, 1e20, 0]], [[0, 1, 2]], r"reach 1e\+20 .* below 1.84e\+19"),
+    ([[1.5e19, 1.5e19, 1.5e19], [1.6e19, 1.5e19, 1.5e19], [1.5e19, 1.6e19, 1.5e19]], [[0, 1, 2]],
+     r"reach 2.66e\+19 from the origin"),
 ])
 def test_bad_input_is_a_mesh_error_naming_it(vertices, faces, message):
     with pytest.raises(MeshError, match=message) as exc:
         build_dag(np.asarray(vertices, float), np.asarray(faces), None, progress=False, name="bad.ply")
     assert "bad.ply" in str(exc.value)
+
+
+def test_a_mesh_just_within_the_float32_square_limit_builds():
+    lod = build_dag(np.array([[0, 0, 0], [1e19, 0, 0], [0, 1e19, 0]]), np.array([[0, 1, 2]]), None, progress=False)
+    assert all(np.isfinite(lod.clusters[k]).all() for k in ("sphere", "lod_sphere", "cone"))
 
 
 def test_bad_settings_and_lod():

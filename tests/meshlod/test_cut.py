@@ -25,7 +25,7 @@ from paramlod.meshlod import buffers
 from paramlod.meshlod.buffers import DeviceMeshes, MeshArrays, MeshInstances
 from paramlod.meshlod.build.dag import build_dag
 from paramlod.meshlod.cut import ClusterCut, Selection
-from paramlod.meshlod.cut_reference import COUNTERS, SIMILAR, projected_error, cut_camera, select
+from paramlod.meshlod.cut_reference import COUNTERS, ONE_SIDED, SIMILAR, projected_error, cut_camera, select
 from paramlod.meshlod.format import MeshLod
 from paramlod.scene.scene import Material, MeshObject
 from paramlod.surfels.build.views import OrthoCamera
@@ -179,10 +179,16 @@ def scene_of(objects):
     return arrays, instances
 
 
+def one_sided_first(k) -> Material:
+    """Object k's material: the even ones one-sided (backface cones apply), the odd ones two-sided."""
+    return Material(two_sided=k % 2 == 1)
+
+
 def objects_for(rng, mesh_counts, spread=4.0):
     objs = []
     for k, (mesh, n) in enumerate(mesh_counts):
-        objs.append(MeshObject(mesh, np.eye(4), Material(), k + 1, count=n, transforms=random_models(rng, n, spread)))
+        objs.append(MeshObject(mesh, np.eye(4), one_sided_first(k), k + 1, count=n,
+                               transforms=random_models(rng, n, spread)))
     return objs
 
 
@@ -275,7 +281,7 @@ def per_instance(pairs, arrays, instances):
 
 # --- device == twin -----------------------------------------------------------------------------
 def test_twin_flag_matches_the_instance_flag():
-    assert SIMILAR == buffers.SIMILAR
+    assert (SIMILAR, ONE_SIDED) == (buffers.SIMILAR, buffers.ONE_SIDED)
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -473,7 +479,7 @@ def test_frustum_culling_drops_only_clusters_outside():
 
 def test_backface_culling_drops_only_clusters_facing_away():
     """Every triangle of a culled cluster faces away from the eye (its outward normal in world
-    space, flipped under a mirror, against the view ray); only SIMILAR instances are culled."""
+    space, flipped under a mirror, against the view ray); only SIMILAR, ONE_SIDED instances are culled."""
     cut_ = ClusterCut()
     rng = np.random.default_rng(31)
     lod = clustered_sphere()
@@ -487,7 +493,7 @@ def test_backface_culling_drops_only_clusters_facing_away():
         assert counts["culled_backface"] == len(culled)
         ahead = -cam.view[2, :3]
         for i, c in culled:
-            assert flags[i] & SIMILAR
+            assert flags[i] & SIMILAR and flags[i] & ONE_SIDED
             model = instances.inst_f[i, :16].reshape(4, 4).astype(np.float64)
             cl = arrays.clusters[c]
             tri = arrays.triangles[cl["first"]:cl["first"] + cl["count"]]
@@ -564,7 +570,7 @@ def unit_objects(rng, lods_counts, spread=4.0):
         c, r = lod.bounding_sphere()
         to_unit = np.diag([1 / r, 1 / r, 1 / r, 1.0])
         to_unit[:3, 3] = -c / r
-        objs.append(MeshObject(lod, np.eye(4), Material(), k + 1, count=n,
+        objs.append(MeshObject(lod, np.eye(4), one_sided_first(k), k + 1, count=n,
                                transforms=random_models(rng, n, spread) @ to_unit))
     return objs
 
@@ -603,7 +609,7 @@ def test_real_cones_cull_only_triangles_facing_away(real_dags):
         culled, counts = _culled(cut_, dev, cam, cull_frustum=False, cull_backface=True)
         assert counts["culled_backface"] == len(culled)
         for i, c in culled:
-            assert flags[i] & SIMILAR
+            assert flags[i] & SIMILAR and flags[i] & ONE_SIDED
             model = instances.inst_f[i, :16].reshape(4, 4).astype(np.float64)
             cl = arrays.clusters[c]
             tri = arrays.triangles[cl["first"]:cl["first"] + cl["count"]]

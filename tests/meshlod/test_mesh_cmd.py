@@ -89,3 +89,7 @@ def test_errors_name_the_file(ply, tmp_path, capsys):
     assert "bad.meshlod" in _error(capsys)
     assert main(["mesh", "build", str(bad)]) == 2
     assert "already a .meshlod file" in _error(capsys)
+    far = tmp_path / "far.obj"
+    far.write_text("v 0 0 0\nv 1e20 0 0\nv 0 1e20 0\nf 1 2 3\n")
+    assert main(["mesh", "build", str(far), "--no-cache", "-o", str(tmp_path / "far.meshlod")]) == 2
+    assert "far.obj: vertices reach 1e+20" in _error(capsys)

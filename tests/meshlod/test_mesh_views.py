@@ -43,8 +43,8 @@ from paramlod.scene.scene import Material, MeshObject
 from paramlod.surfels.build.views import OrthoCamera
 
 from helpers.meshes import grid, sphere
-from test_cut import clustered_sphere, collapsed_groups, dag_relations, objects_for, random_models, scene_of, \
-    synthetic_lod
+from test_cut import clustered_sphere, collapsed_groups, dag_relations, objects_for, one_sided_first, random_models, \
+    scene_of, synthetic_lod
 from test_raster import Scene as RasterScene, flat_lod, translate
 from test_render import bumpy_sphere
 from test_skin_bounds import random_rig_mesh
@@ -94,13 +94,13 @@ def shows_in(arrays, instances, i, c, camera, margin=1e-3):
 
 def culled_in(arrays, instances, i, c, camera):
     """The cluster shows nothing in the camera's view (float64 brute force, as test_cut checks):
-    every vertex outside one clip plane, or (SIMILAR instances) every triangle facing away."""
+    every vertex outside one clip plane, or (SIMILAR, ONE_SIDED instances) every triangle facing away."""
     clip, p, model = cluster_clip(arrays, instances, i, c, camera)
     w = clip[:, 3]
     tol = 1e-6 * np.abs(clip).max()
     if any((clip[:, a] * s < -w + tol).all() for a in range(3) for s in (1, -1)):
         return True
-    if not instances.inst_u[i, 3] & buffers.SIMILAR:
+    if not (instances.inst_u[i, 3] & buffers.SIMILAR and instances.inst_u[i, 3] & buffers.ONE_SIDED):
         return False
     n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * np.sign(np.linalg.det(model[:3, :3]))
     ray = np.broadcast_to(-camera.view[2, :3], p[:, 0].shape) if isinstance(camera, OrthoCamera) else p[:, 0] - camera.eye
@@ -127,7 +127,8 @@ def dag_scene(dags, rng, n=4, spread=3.0):
         c, r = lod.bounding_sphere()
         to_unit = np.diag([1 / r, 1 / r, 1 / r, 1.0])
         to_unit[:3, 3] = -c / r
-        objs.append(MeshObject(lod, np.eye(4), Material(), k + 1, count=n, transforms=random_models(rng, n, spread) @ to_unit))
+        objs.append(MeshObject(lod, np.eye(4), one_sided_first(k), k + 1, count=n,
+                               transforms=random_models(rng, n, spread) @ to_unit))
     return scene_of(objs)
 
 

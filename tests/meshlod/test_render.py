@@ -78,6 +78,20 @@ def test_threshold_zero_draws_every_original_triangle(lod):
     assert f.stats["clusters_drawn"] == int((lod.clusters["level"] == 0).sum())
 
 
+@pytest.mark.parametrize("variant", ["meshlets", "meshlets-gl"])
+def test_a_triangle_seen_from_behind_shows_unless_one_sided(variant):
+    """Back-face culling (on by default) drops clusters of one-sided materials only: a two-sided
+    triangle (the default material) still shows its back."""
+    tri = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), np.array([[0, 1, 2]]))   # faces +z
+    behind = pl.Camera.look_at((0.3, 0.3, -3), (0.3, 0.3, 0), size=(64, 48))
+    drawn = {}
+    for two_sided in (True, False):
+        s = pl.Scene()
+        s.add_mesh(tri, material=pl.Material(two_sided=two_sided))
+        drawn[two_sided] = int((pl.render(s, behind, variant).object_id == 1).sum())
+    assert drawn[True] > 100 and drawn[False] == 0
+
+
 def test_mesh_and_parametric_compose_in_one_key_buffer(lod):
     s = pl.Scene()
     s.add_mesh(lod, transform=pl.translate(-0.6, 0, 0), material=pl.Material((0.9, 0.3, 0.2)))

@@ -52,11 +52,22 @@ def test_bad_mesh_files(tmp_path, name, content, message):
     ({"n": 0}, "positive integer"), ({"n": -5}, "positive integer"), ({"n": 2.5}, "positive integer"),
     ({"n": "many"}, "positive integer"), ({"n": 10, "views": 0}, "views"), ({"n": 10, "views": 33}, "views"),
     ({"n": 10, "resolution": 4}, "resolution"),
+    ({"n": 10, "seed": -1}, "seed must be a non-negative integer, got -1"), ({"n": 10, "seed": 1.5}, "seed"),
 ])
 def test_bad_sampling_parameters(mesh_file, kw, message):
     n = kw.pop("n")
     with pytest.raises(SurfelError, match=message):
         sample_mesh(mesh_file, n, **kw)
+
+
+def test_a_mesh_too_large_to_square_in_float32_names_its_file(tmp_path):
+    # its squared distances were infinite: "surfel set: 'radii' contains NaN or infinite values"
+    far, near = tmp_path / "far.obj", tmp_path / "near.obj"
+    far.write_text("v 0 0 0\nv 1e20 0 0\nv 0 1e20 0\nf 1 2 3\n")
+    near.write_text("v 0 0 0\nv 1e19 0 0\nv 0 1e19 0\nf 1 2 3\n")
+    with pytest.raises(SurfelError, match=r"mesh 'far.obj' spans 1.41e\+20, beyond 1.84e\+19"):
+        sample_mesh(far, 10, views=4, resolution=32)
+    assert np.isfinite(sample_mesh(near, 10, views=4, resolution=32).radii).all()
 
 
 def test_truncated_or_corrupt_surfels_files(tmp_path, small_set):
@@ -145,6 +156,7 @@ def test_cli_bad_input(tmp_path, mesh_file, capsys):
     for args, message in [
         (["sample", str(tmp_path / "missing.obj"), "-n", "10", "-o", str(out)], "does not exist"),
         (["sample", str(mesh_file), "-n", "0", "-o", str(out)], "positive integer"),
+        (["sample", str(mesh_file), "-n", "10", "--seed=-1", "-o", str(out)], "seed must be a non-negative integer"),
         (["sample", str(mesh_file), "-n", "10", "-o", str(tmp_path / "nodir" / "x.surfels")], "does not exist"),
         (["info", str(mesh_file)], "truncated or corrupt"),
         (["render", str(tmp_path / "none.surfels"), "-o", str(tmp_path / "a.png")], "does not exist"),

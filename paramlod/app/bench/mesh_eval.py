@@ -60,7 +60,7 @@ SSIM_VARIANT = ("1 - SSIM: scikit-image structural_similarity on the sRGB-encode
 FLIP_VARIANT = ("FLIP: flip_evaluator.evaluate(reference, test, 'LDR', inputsRGB=True), the mean of the error "
                 "map, at its default 67 pixels per degree")
 _ORIGINAL_VERTEX_BYTES = 32    # the device's float4 position + float4 normal
-_MATERIAL = Material((0.75, 0.7, 0.62))
+_MATERIAL = Material((0.75, 0.7, 0.62), two_sided=False)   # closed scans: clusters facing away culled
 
 
 # --- the meshes ------------------------------------------------------------------------------------

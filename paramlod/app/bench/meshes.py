@@ -22,6 +22,9 @@ from paramlod.pipeline.settings import RenderSettings
 from paramlod.scene.meshes import read_mesh
 from paramlod.scene.scene import Material, Scene
 
+# the scanned meshes are closed: one-sided, so clusters that face away are culled
+SCANNED = Material((0.75, 0.7, 0.62), two_sided=False)
+
 MESH_VARIANTS = ("meshlets", "meshlets-gl")
 
 
@@ -58,7 +61,7 @@ def grid_scene(lod, n: int = 10, spacing: float = 2.0) -> Scene:
     tr[:, 0, 3] += (i - (n - 1) / 2) * spacing
     tr[:, 2, 3] += (j - (n - 1) / 2) * spacing
     s = Scene()
-    s.add_mesh_instances(lod, n * n, transforms=tr, material=Material((0.75, 0.7, 0.62)))
+    s.add_mesh_instances(lod, n * n, transforms=tr, material=SCANNED)
     return s
 
 
@@ -165,7 +168,7 @@ def run_meshes(size, frames: int, warmup: int, big: bool, grid: int = 10, log=pr
 
 def _one(lod) -> Scene:
     s = Scene()
-    s.add_mesh(lod, transform=normalizing(lod.vertices), material=Material((0.75, 0.7, 0.62)))
+    s.add_mesh(lod, transform=normalizing(lod.vertices), material=SCANNED)
     return s
 
 
