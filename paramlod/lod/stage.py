@@ -353,8 +353,8 @@ class LodStage:
         if n > settings.max_patches:
             raise CapacityError(
                 f"the LOD stage needs {n} {what}, more than max_patches={settings.max_patches}; "
-                "raise max_patches ([render] in a scene file; memory: 64 bytes a render patch, 32 an evaluated one), raise the threshold, "
-                "or lower max_steps")
+                "raise max_patches ([render] in a scene file; memory: 64 bytes a render patch, 32 an evaluated "
+                "one), raise the threshold, or lower max_steps")
 
     def read_render_list(self, n) -> np.ndarray:
         out = np.empty(n, RENDER_DTYPE)
