@@ -267,7 +267,8 @@ def _finish(parts, where: str, name: str) -> TriangleMesh:
                         "faces index the vertex array from 0")
     if len(v) >= 2 ** 32:
         raise MeshError(f"{where} has {len(v)} vertices; at most 2^32 - 1 can be indexed")
-    v32 = v.astype(np.float32)
+    with np.errstate(over="ignore"):   # the overflow is reported below, by name
+        v32 = v.astype(np.float32)
     if not np.all(np.isfinite(v32)):
         raise MeshError(f"{where}: vertex coordinates overflow float32 (|x| > 3.4e38); scale the mesh down")
     v32, f, n = _weld(v32, f, n)
