@@ -14,10 +14,6 @@
 #define pl_sqrtf sqrt
 #define pl_fabsf fabs
 #define pl_finitef isfinite
-#define pl_dot3 dot
-#define pl_length2 length
-#define pl_length3 length
-#define pl_normalize3 normalize
 #else
 #define pl_ceilf __builtin_ceilf
 #define pl_floorf __builtin_floorf
@@ -26,6 +22,16 @@
 #define pl_sqrtf __builtin_sqrtf
 #define pl_fabsf __builtin_fabsf
 #define pl_finitef(x) (pl_fabsf(x) < INFINITY)   // false for NaN and the infinities
+#endif
+// A program whose keys must equal its twin's on every device (-D PL_EXACT_VECTORS: the mesh raster)
+// takes these too on a GPU: NVIDIA's dot and normalize round differently (on an H100, one pixel's
+// shade in 41,472 came out an sRGB code apart)
+#if PL_GPU && !defined(PL_EXACT_VECTORS)
+#define pl_dot3 dot
+#define pl_length2 length
+#define pl_length3 length
+#define pl_normalize3 normalize
+#else
 inline float pl_length2(float2 a) {
 #pragma OPENCL FP_CONTRACT OFF
     return pl_sqrtf(a.x * a.x + a.y * a.y);

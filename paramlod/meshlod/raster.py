@@ -53,7 +53,8 @@ class MeshRaster:
         self.large_pixels, self.large_capacity = int(large_pixels), int(large_capacity)
         prog = build(["meshlod/raster.cl"], defines={"RS_SUBPIXEL_BITS": SUBPIXEL_BITS,
                                                      "RS_GUARD_PIXELS": GUARD_PIXELS,
-                                                     "RS_LARGE_LOCAL": LARGE_LOCAL}, options=EXACT_DIVISION)
+                                                     "RS_LARGE_LOCAL": LARGE_LOCAL,
+                                                     "PL_EXACT_VECTORS": 1}, options=EXACT_DIVISION)
         # own kernel objects: arguments are set only when they change (see enqueue)
         self.k_clusters = cl.Kernel(prog, "raster_clusters")
         self.k_large = cl.Kernel(prog, "raster_large")
