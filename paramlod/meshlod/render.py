@@ -67,7 +67,7 @@ class MeshSettings:
     ``threshold_px``: the largest projected error of a drawn cluster, in pixels of the target (0:
     the original triangles); ``cull_frustum``, ``cull_backface``: per-cluster culling, the
     backface cones only for objects whose material is one-sided (``two_sided`` False: a two-sided
-    mesh shows its back faces; skinned meshes' class-0 meshlets are culled whatever the material);
+    mesh shows its back faces; skinned meshes' class-0 meshlets likewise, per batch);
     ``color_by``: "material", or a debug colour per "cluster" or per LOD "level"."""
     threshold_px: float = 1.0
     cull_frustum: bool = True

@@ -92,10 +92,12 @@ class SkinCull:
             for m, i0, ni in dev.instances.batches:
                 if m != mesh or nc == 0 or ni == 0:
                     continue
+                # a batch with a two-sided material shows its back faces: frustum test only (mode bit 2)
+                batch_mode = mode if ref.one_sided(dev.instances, i0, ni) else mode & np.uint32(1)
                 k.set_args(self.spheres, self.cones, self.meta, np.uint32(first), np.uint32(nc), np.uint32(c0),
                            np.uint32(i0), np.uint32(j0), np.float32(sr), dev.inst_f, dev.scales, dev.weights,
-                           dev_skin, cc[:cref.CC_FLOATS], cams, np.uint32(n), mode, buf, masks, np.uint32(capacity),
-                           counters)
+                           dev_skin, cc[:cref.CC_FLOATS], cams, np.uint32(n), batch_mode, buf, masks,
+                           np.uint32(capacity), counters)
                 groups = -(-nc // SC_LOCAL)
                 events.append(launch(q, k.k, (groups * SC_LOCAL, int(ni)), (SC_LOCAL, 1)))
         self.events = events

@@ -13,7 +13,8 @@ M_i, largest scale s_i, the frame's float32 skin matrix J = J_p):
   value, so R >= the true bound |M_i J (q - c)| <= s_i sigma(J) |q - c|; equal for orthogonal
   columns, i.e. any T R S joint); culled when wholly outside one of the six planes of the cut
   camera record (paramlod.meshlod.cut_reference.cut_camera; the test of kernels/meshlod/cut_common.cl);
-* backface (class 0 only): in the principal joint's space (PBS, q = J^-1 M_i^-1 x) the meshlet lies
+* backface (class 0 only, and only in batches whose instances all have a one-sided material,
+  ``one_sided``: a two-sided mesh shows its back faces): in the principal joint's space (PBS, q = J^-1 M_i^-1 x) the meshlet lies
   in the sphere (c, r s_r) and its triangle normals within alpha of n at every time of the clip. The
   eye (homogeneous E, E_w = 1 perspective, 0 orthographic) is brought there exactly: mesh space by
   the instance's normal matrix as the static cut does, PBS by adj(J3) / det(J3). Facing is invariant
@@ -33,11 +34,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from paramlod.core.layouts import INSTANCE_F
+from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
 from paramlod.core.views import as_views
 from paramlod.errors import MeshError
-from paramlod.meshlod.cut_reference import (CC_EYE, COUNTERS, append_selected, cut_camera, planes_outside,
-                                           sort_views)
+from paramlod.meshlod.cut_reference import (CC_EYE, COUNTERS, ONE_SIDED, append_selected, cut_camera,
+                                           planes_outside, sort_views)
 
 SLACK = 2.0 ** -12
 _F = np.float32
@@ -111,6 +112,12 @@ def backfacing(S, sr, cone, model, normal, J, cc):
         return ok & (length > 0) & np.isfinite(length) & (lhs >= rhs)
 
 
+def one_sided(instances, i0: int, ni: int) -> bool:
+    """Whether every instance of the batch ``i0 .. i0 + ni`` has a one-sided material (MeshInstances
+    flag ONE_SIDED): only such batches get the backface test (the driver passes it per batch)."""
+    return bool(np.all(instances.inst_u[i0:i0 + ni, INSTANCE_U.offset("flags")] & ONE_SIDED))
+
+
 def select(bounds_list, slots, instances, skin, camera, cull_frustum=True, cull_backface=True, weights=None):
     """The skinned cull of every skinned slot. ``bounds_list``: SkinBounds per slot (in slot order);
     ``slots``: (mesh index, first cluster, first joint) per slot; ``instances``: a MeshInstances
@@ -160,7 +167,7 @@ def select_views(bounds_list, slots, instances, skin, cameras, cull_frustum=True
             for v, cc in enumerate(ccs):
                 outside = tested & planes_outside(w, r, cc) if cull_frustum else np.zeros((ni, nc), bool)
                 back = tested & ~outside & (cls == 0) & backfacing(S, sr, con[None], model, normal, J, cc) \
-                    if cull_backface else np.zeros((ni, nc), bool)
+                    if cull_backface and one_sided(instances, i0, ni) else np.zeros((ni, nc), bool)
                 mask &= np.where(outside | back, ~np.uint64(1 << v), ~np.uint64(0))
                 all_outside &= outside
             append_selected(draw, mask, all_outside, meta[:, 2], i0, c0, counts, pairs, masks)

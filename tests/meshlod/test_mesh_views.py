@@ -257,7 +257,8 @@ def skinned():
     bounds = [skin_bounds(gentle, SkinBoundsSettings(max_radius_scale=50.0, max_cone_angle_deg=89.0), progress=False),
               skin_bounds(wild, SkinBoundsSettings(max_radius_scale=1.45), progress=False)]
     rng = np.random.default_rng(0)
-    objs = [MeshObject(gentle, np.eye(4), Material(), 1, count=4, transforms=random_models(rng, 4, 3.0)),
+    # a one-sided object (backface tests) and a two-sided one (frustum tests only)
+    objs = [MeshObject(gentle, np.eye(4), Material(two_sided=False), 1, count=4, transforms=random_models(rng, 4, 3.0)),
             MeshObject(wild, np.eye(4), Material(), 2, count=2, transforms=random_models(rng, 2, 3.0))]
     own = {id(o): k for k, o in enumerate(objs)}
     instances = MeshInstances.pack(objs, lambda o: own[id(o)])
@@ -456,7 +457,7 @@ def test_skinned_mesh_in_two_views(worm, variant):
             pl.Camera.look_at(c + np.array([1.0, -0.3, 0.2]) * r * 1.6, c, (0, 1, 0), 40.0, SIZE, near=r * 0.02,
                               far=r * 8)]
     s = pl.Scene()
-    s.add_skinned_mesh(worm, variant=variant)
+    s.add_skinned_mesh(worm, variant=variant, material=pl.Material(two_sided=False))
     frames = pl.render_views(s, cams, time=0.3)
     per_view = [f.stats["view_counts"]["clusters_drawn"] for f in frames]
     n = len(worm.clusters)

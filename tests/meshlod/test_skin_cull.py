@@ -50,7 +50,8 @@ def scene():
     bounds = [skin_bounds(gentle, SkinBoundsSettings(max_radius_scale=50.0, max_cone_angle_deg=89.0), progress=False),
               skin_bounds(wild, SkinBoundsSettings(max_radius_scale=1.45), progress=False)]
     rng = np.random.default_rng(0)
-    objs = [MeshObject(gentle, np.eye(4), Material(), 1, count=4, transforms=_models(rng, 4, 3.0)),
+    # a one-sided object (backface tests) and a two-sided one (frustum tests only)
+    objs = [MeshObject(gentle, np.eye(4), Material(two_sided=False), 1, count=4, transforms=_models(rng, 4, 3.0)),
             MeshObject(wild, np.eye(4), Material(), 2, count=2, transforms=_models(rng, 2, 3.0))]
     own = {id(o): k for k, o in enumerate(objs)}   # each object its own mesh
     instances = MeshInstances.pack(objs, lambda o: own[id(o)])

@@ -382,7 +382,7 @@ def test_culling_on_and_off_draw_the_same_pixels_over_the_clip(culling_worm, var
             bench_cameras(mesh, (80, 60), 1)["mouth"][0]]   # into the mouth: the inner wall shows
     on = pl.RenderSettings()
     s = pl.Scene()
-    s.add_skinned_mesh(mesh, variant=variant)
+    s.add_skinned_mesh(mesh, variant=variant, material=pl.Material(two_sided=False))   # closed: back faces hidden
     culled = {"frustum": 0, "backface": 0}
     for t in np.linspace(mesh.rig.start, mesh.rig.end, 5)[:-1] + 0.07:
         for cam in cams:
@@ -398,6 +398,11 @@ def test_culling_on_and_off_draw_the_same_pixels_over_the_clip(culling_worm, var
                 a.stats["clusters_culled_backface"] == len(mesh.clusters)
     assert culled["frustum"] > 0 and culled["backface"] > 0
     assert mesh.bounds is not None and len(mesh.bounds.principal) == len(mesh.clusters)
+    # two-sided (the default material): back faces show, so no meshlet goes to the backface test
+    two = pl.Scene()
+    two.add_skinned_mesh(mesh, variant=variant)
+    f = pl.render(two, cams[0], settings=on, time=0.07)
+    assert f.stats["clusters_culled_backface"] == 0 and f.stats["clusters_culled_frustum"] > 0
 
 
 def test_culling_a_real_file_changes_no_pixel():

@@ -137,7 +137,7 @@ def run_skinned(size, frames: int, warmup: int, size_name: str = "full", log=pri
     for view, cams in cameras(mesh, size, frames).items():
         for variant in VARIANTS:
             scene = Scene()
-            scene.add_skinned_mesh(mesh, variant=variant, material=Material((0.55, 0.45, 0.4)))
+            scene.add_skinned_mesh(mesh, variant=variant, material=Material((0.55, 0.45, 0.4), two_sided=False))   # closed
             try:
                 on, ids_on = _frames(scene, mesh, cams, times, variant, True, warmup)
                 off, ids_off = _frames(scene, mesh, cams, times, variant, False, warmup)
