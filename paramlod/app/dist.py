@@ -201,6 +201,17 @@ class Where:
     retries: int = DEFAULT_RETRIES
     threads: int | None = None
 
+    def __post_init__(self):   # the command line's checks, for Where built in Python too
+        checks = (("workers", _local_workers), ("gpus", _gpus), ("scheduler", _scheduler),
+                  ("retries", non_negative_int), ("threads", positive_int))
+        for name, check in checks:
+            value = getattr(self, name)
+            if value is not None:
+                try:
+                    check(str(value))
+                except argparse.ArgumentTypeError as exc:
+                    raise ParamlodError(f"Where {name}: {exc}") from None
+
     @property
     def serial(self) -> bool:
         return not (self.workers or self.gpus or self.scheduler)

@@ -148,3 +148,13 @@ def test_a_video_that_cannot_be_written_is_one_message(tmp_path, monkeypatch, su
     with pytest.raises(ParamlodError, match=f"cannot write {out}: {why}$"):
         dist.write_video(out, frames, 24.0)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f0.png", "f1.png", "ffmpeg"]
+
+
+def test_where_built_in_python_is_checked_as_the_options_are(tmp_path):
+    """dist.Where took any values from Python (a missing scheduler file reached Dask)."""
+    for kw, what in ((dict(scheduler=str(tmp_path / "nope.json")), "Where scheduler: scheduler file .* does not exist"),
+                     (dict(workers=10_000), "Where workers: at most"), (dict(retries=-1), "Where retries"),
+                     (dict(gpus="first"), "Where gpus"), (dict(threads=0), "Where threads")):
+        with pytest.raises(ParamlodError, match=what):
+            dist.Where(**kw)
+    assert dist.Where(workers=1, retries=0).workers == 1
