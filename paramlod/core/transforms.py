@@ -12,6 +12,14 @@ from paramlod.errors import SceneError
 PLACE_LIMIT = 1e15   # largest |coordinate| / |scale| a transform or camera may hold
 MIN_SCALE = 1e-15    # smallest |scale| of a transform's 3x3 part (its determinant's cube root)
 AFFINE_TOL = 1e-9    # how far a bottom row may stray from [0, 0, 0, 1] (rounding in a product)
+# the largest magnitude whose square float32 holds (1.8e19): code that squares coordinates or
+# distances in float32 (meshoptimizer's build, the surfel sampler's keys) needs its inputs below it
+SQUARE_LIMIT = float(np.sqrt(np.finfo(np.float32).max))
+
+
+def is_number(x) -> bool:
+    """A real number (Python's or numpy's), not a bool (True passes for 1 in int)."""
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
 
 
 def check_values(values, what: str) -> np.ndarray:

@@ -17,6 +17,7 @@ import pyopencl as cl
 from pyopencl import cltypes
 
 from paramlod.core.layouts import CAMERA, LOD_COUNTER, constant
+from paramlod.core.transforms import is_number
 from paramlod.core.views import MAX_VIEWS
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, SceneError
@@ -64,11 +65,9 @@ class LodSettings:
 
     def validate(self):
         t = self.threshold
-        if isinstance(t, (int, float, np.integer, np.floating)) and not isinstance(t, bool):
+        if is_number(t):
             self.threshold = t = (float(t), float(t))   # one number for both, as a scene file's threshold
-        ok = isinstance(t, (tuple, list, np.ndarray)) and len(t) == 2 and all(
-            isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and x > 0 for x in t)
-        if not ok:
+        if not (isinstance(t, (tuple, list, np.ndarray)) and len(t) == 2 and all(is_number(x) and x > 0 for x in t)):
             raise SceneError(f"lod threshold must be positive pixels, one number or two (t_u, t_v), got {t!r}")
         if not 1 <= self.max_steps <= 15:
             raise SceneError(f"lod max_steps must be in 1..15, got {self.max_steps}")

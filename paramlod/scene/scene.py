@@ -29,7 +29,7 @@ from paramlod.scene.loaders import load
 from paramlod.scene.meshes import source_key, source_label
 from paramlod.core.color import srgb_to_linear
 from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
-from paramlod.core.transforms import MIN_SCALE, PLACE_LIMIT, check_transform, check_values, matrix as _as_matrix
+from paramlod.core.transforms import MIN_SCALE, PLACE_LIMIT, check_transform, check_values, is_number, matrix as _as_matrix
 
 # Per-instance float record (paramlod.core.layouts.INSTANCE_F, INST_* in the kernels' prelude):
 # 4x4 model matrix (row-major), 3x4 normal matrix rows, domain (u0, u1, v0, v1).
@@ -59,8 +59,7 @@ class Material:
             c = np.full(0, np.nan)
         if c.shape != (3,) or not np.all((c >= 0) & (c <= 1)):
             raise SceneError(f"material color must be three numbers in [0, 1], got {self.color!r}")
-        if isinstance(self.specular, bool) or not isinstance(self.specular, (int, float, np.integer, np.floating)) \
-                or not 0 <= self.specular <= 1:
+        if not (is_number(self.specular) and 0 <= self.specular <= 1):
             raise SceneError(f"material specular must be in [0, 1], got {self.specular!r}")
         self.color = tuple(float(x) for x in c)
 
@@ -188,8 +187,7 @@ class Scene:
 
     @time.setter
     def time(self, value):
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-                or not np.isfinite(value):
+        if not (is_number(value) and np.isfinite(value)):
             raise SceneError(f"scene time must be a finite number, got {value!r}")
         self._time = float(value)
 
@@ -330,8 +328,7 @@ class Scene:
         if animation is not None and (isinstance(animation, bool) or not isinstance(animation, (str, int, np.integer))):
             raise SceneError(f"skinned mesh '{label}': animation must be a name or an index, got {animation!r}")
         if time is not None:
-            if isinstance(time, bool) or not isinstance(time, (int, float, np.integer, np.floating)) \
-                    or not np.isfinite(time):
+            if not (is_number(time) and np.isfinite(time)):
                 raise SceneError(f"skinned mesh '{label}': time must be a finite number of seconds or None, got {time!r}")
             time = float(time)
         m = _mesh_model(f"skinned mesh '{label}'", material, transform)

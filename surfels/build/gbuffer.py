@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from paramlod import kernels
+from paramlod.core.transforms import SQUARE_LIMIT
 from paramlod.device.context import gl_context
 from paramlod.errors import SurfelError
 from paramlod.pipeline.driver import render
@@ -132,16 +133,11 @@ class MeshRasterizer:
         self.program.release()
 
 
-# the sampler's keys are float32 squared distances between surface points: a mesh spanning more
-# than this (1.8e19) would give infinite surfel radii
-SPAN_LIMIT = float(np.sqrt(np.finfo(np.float32).max))
-
-
 def mesh_gbuffer(soup: TriangleSoup, views: int = 16, resolution: int = 512) -> GBuffer:
     lo, hi = soup.bounds
     span = float(np.linalg.norm(hi - lo))
-    if span > SPAN_LIMIT:
-        raise SurfelError(f"mesh '{soup.name}' spans {span:.3g}, beyond {SPAN_LIMIT:.3g} (the sampler squares "
+    if span > SQUARE_LIMIT:   # the sampler's keys, float32 squared distances, would give infinite radii
+        raise SurfelError(f"mesh '{soup.name}' spans {span:.3g}, beyond {SQUARE_LIMIT:.3g} (the sampler squares "
                           "distances in float32); scale the mesh down")
     centre, radius = soup.bounding_sphere()
     vs = make_views(centre, radius, views, resolution)

@@ -37,6 +37,7 @@ import numpy as np
 from tqdm import tqdm
 
 from paramlod.core.layouts import CLUSTER
+from paramlod.core.transforms import SQUARE_LIMIT
 from paramlod.errors import MeshError
 from paramlod.meshlod.build import meshopt
 from paramlod.meshlod.format import MeshLod
@@ -46,9 +47,6 @@ _INFLATE = 1e-6        # relative slack on every sphere radius (float32 roundoff
 _ERROR_FLOOR = 1e-6    # relative to the mesh's radius: a group's error is at least this above its children's
 _QUIET_BELOW = 200_000 # triangles: builds smaller than this show no progress bar by default
 CLUSTER_MAX_TRIANGLES = CLUSTER.constant("CLUSTER_MAX_TRIANGLES")
-# meshoptimizer squares vertex positions and distances between vertices in float32: beyond this
-# (1.8e19) its meshlets come out empty and its bounding spheres infinite
-SQUARE_LIMIT = float(np.sqrt(np.finfo(np.float32).max))
 
 
 class SettingsRecord:
@@ -130,7 +128,7 @@ def check_mesh(vertices, faces, normals=None, what: str = "mesh"):
     p = v.astype(np.float64)
     far = float(np.sqrt((p ** 2).sum(axis=1).max()))
     span = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
-    if max(far, span) > SQUARE_LIMIT:
+    if max(far, span) > SQUARE_LIMIT:   # meshoptimizer's meshlets come out empty, its spheres infinite
         raise MeshError(f"{what}: vertices reach {far:.3g} from the origin and span {span:.3g}; both must stay below "
                         f"{SQUARE_LIMIT:.3g} (the LOD build squares them in float32); scale the mesh down")
     if f.min() < 0 or f.max() >= len(v):
