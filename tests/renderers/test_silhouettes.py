@@ -9,6 +9,7 @@ import pytest
 import paramlod as pl
 from helpers.silhouettes import glyph_case, iou_of, settings_for
 from paramlod.app.bench import peers
+from paramlod.renderers.aa import POINT_TIERS, parse_aa
 from paramlod.scene.framing import framing_camera
 
 VARIANTS = (("tess", "noAA"), ("tess", "hybrid"), ("points", "noAA"), ("points", "hybrid"))
@@ -56,7 +57,12 @@ def test_hybrid_keeps_the_lobes_of_20_pixel_glyphs(order):
     improves on noAA (0.94 / 0.79 / 0.73 against 0.86 / 0.50 / 0.46); with the default, the longest
     segment's levels in the tiers the spot check sent patches to ("detail"), it reaches 0.9
     (0.94 / 0.91 / 0.91), and the points hybrid with quad coverage agrees with it within 0.03
-    (0.95 / 0.91 / 0.92)."""
+    (0.95 / 0.91 / 0.92). That holds where both hybrids take the same samples per pixel in each
+    tier, as where the device's multisampling stops at 4 (llvmpipe: tess's tiers are 4xMS and
+    4xSS+4xMS, the points' 4xSS and 16xSS). With 8xMS (an H100) the tess tiers take twice the
+    points' samples, whose 2 x 2 subsamples put a pixel at alpha 1/2 wherever an edge passes within
+    a quarter pixel of its centre: there tess reaches 0.98 / 0.98 / 0.92 and the points with quads
+    trail it by up to 0.065 (order 8), never lead it by more than 0.03."""
     scene, cam, ref = glyph_case(order, 20)
     points = iou_of(pl.render(scene, cam, "points", settings_for("points", "hybrid")), ref)
     assert points >= 0.8
@@ -64,12 +70,20 @@ def test_hybrid_keeps_the_lobes_of_20_pixel_glyphs(order):
     rs = settings_for("tess", "hybrid")
     rs.tess.inner_measure = "extent"
     extent = iou_of(pl.render(scene, cam, "tess", rs), ref)
-    tess = iou_of(pl.render(scene, cam, "tess", settings_for("tess", "hybrid")), ref)
+    tess_frame = pl.render(scene, cam, "tess", settings_for("tess", "hybrid"))
+    tess = iou_of(tess_frame, ref)
     assert extent >= noaa + (0.05 if order == 4 else 0.2) and tess >= 0.9, (noaa, extent, tess)
     rs = settings_for("points", "hybrid")
     rs.points.coverage = "quad"
     quads = iou_of(pl.render(scene, cam, "points", rs), ref)
-    assert abs(quads - tess) <= 0.03, (quads, tess)
+    assert quads >= 0.9
+    tess_samples = [parse_aa(t["aa"]).samples_per_pixel for t in tess_frame.stats["tiers"]]
+    point_samples = [t.samples_per_pixel for t in POINT_TIERS]
+    if tess_samples == point_samples:
+        assert abs(quads - tess) <= 0.03, (quads, tess)
+    else:   # more multisamples than the points' subsamples: tess may be the more exact
+        assert all(t >= p for t, p in zip(tess_samples, point_samples)), tess_samples
+        assert tess >= quads - 0.03, (tess_samples, quads, tess)
 
 
 @pytest.mark.parametrize("name,direction,up", [("seashell3", (0.0, -1.0, 0.35), (0, 0, 1)),
