@@ -65,8 +65,8 @@ def cmd_render(args) -> int:
     camera = sf.camera
     with progress(f"rendering {camera.width}x{camera.height}"):
         frame = render(sf.scene, camera, variant=variant, settings=sf.settings, time=args.time)
-    label = dist.variant_label(sf, args.variant)
     s = frame.stats
+    label = drawn_variants(s)
     items = [(out, frame.save) for out in outs]
     if args.stats:
         text = json.dumps(s, indent=2)
@@ -76,13 +76,22 @@ def cmd_render(args) -> int:
     ms = s["ms"]
     device = s.get("device") or s.get("lod_device")
     parts = [f"{camera.width}x{camera.height} {label}" + (f" on {device}" if device else "")]
-    if "render_patches" in s:
+    if s.get("render_patches"):   # meshes and surfels have none
         parts.append(f"{s['render_patches']} render patches")
     parts.append(f"{s['pixels_written']} pixels, {ms['total']:.1f} ms")
     print(f"{', '.join(outs)}: " + ", ".join(parts))
     for w in s.get("warnings", []):   # e.g. nothing_drawn: the frame drew no pixel, and why
         print(f"paramlod: warning: {w}", file=sys.stderr)
     return 0
+
+
+def drawn_variants(stats) -> str:
+    """What drew a frame, from its stats: one variant, the variants that shared its key buffers
+    ("points, meshlets"), or a composite's passes in order ("tess, meshlets-gl"). A requested
+    --variant may not be what drew: meshes follow points with meshlets, tess with meshlets-gl."""
+    if stats.get("variant") == "composite":
+        return ", ".join(dict.fromkeys(name.split(" (")[0] for name in stats.get("order", [])))
+    return str(stats.get("variant", "?"))
 
 
 def cmd_render_job(args) -> int:

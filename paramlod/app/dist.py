@@ -649,12 +649,6 @@ def _scene_entry(path, size, variant, aa, cache: bool = True) -> dict:
     return entry
 
 
-def variant_label(sf, variant: str | None) -> str:
-    if sf.object_variants and not variant:
-        return "mixed (" + ", ".join(sorted(set(sf.object_variants))) + ")"
-    return variant or sf.variant
-
-
 def _raw_tables(path) -> dict:
     """The scene file's TOML (load_scene has validated what it knows of it)."""
     return tomllib.loads(Path(path).read_text(encoding="utf-8"))

@@ -325,10 +325,11 @@ class Viewer:
         self.poll()
         self.controls.step(dt)
         if not self.paused:
-            self.time += dt
             anim = self.loaded.animation
-            if anim and anim["t1"] > anim["t0"] and self.time > anim["t1"]:   # loop [t0, t1]
-                self.time = anim["t0"] + (self.time - anim["t0"]) % (anim["t1"] - anim["t0"])
+            span = anim["t1"] - anim["t0"] if anim else 0.0
+            self.time += -dt if span < 0 else dt   # t1 < t0 plays the animation backwards
+            if span and (self.time - anim["t0"]) / span > 1:   # past t1: loop [t0, t1]
+                self.time = anim["t0"] + (self.time - anim["t0"]) % span
         camera = camera or self.controls.camera(self.render_size())
         t1 = time.perf_counter()
         lod_ms = 0.0

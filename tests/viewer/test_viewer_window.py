@@ -239,6 +239,18 @@ def test_an_animated_scene_plays_and_loops(window):
     assert v.time == pytest.approx(0.5)   # 2.5 looped back into [0, 2]
 
 
+def test_an_animation_from_t0_down_to_t1_plays_backwards(window, tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text('[camera]\neye = [0, 0, 6]\n[animation]\nt0 = 2.0\nt1 = 0.0\n[[objects]]\nfunction = "sphere"\n')
+    v = Viewer(Source(scene, SIZE), window, hud_on=False)
+    assert not v.paused and v.time == 2.0
+    v.draw_frame(0.5)
+    assert v.time == pytest.approx(1.5)
+    for _ in range(4):
+        v.draw_frame(0.5)
+    assert v.time == pytest.approx(1.5)   # -0.5 looped back into [0, 2]
+
+
 def test_a_scene_files_plugin_is_watched_and_reloaded(window, tmp_path):
     from paramlod.function import registry
 
