@@ -39,6 +39,7 @@ from __future__ import annotations
 import numpy as np
 
 from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
+from paramlod.core.transforms import is_number
 from paramlod.core.views import as_views
 from paramlod.errors import MeshError
 
@@ -62,7 +63,7 @@ _F = np.float32
 
 def check_threshold(threshold_px) -> float:
     """The threshold as a float, or a MeshError that says what is wrong with it."""
-    if isinstance(threshold_px, bool) or not isinstance(threshold_px, (int, float, np.integer, np.floating)):
+    if not is_number(threshold_px):
         raise MeshError(f"cut threshold_px must be a number of pixels >= 0, got {threshold_px!r}")
     t = float(threshold_px)
     if np.isnan(t) or t < 0:

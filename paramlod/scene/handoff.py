@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from paramlod.core.camera import pixel_world_size, sphere_depth, transform_scale
+from paramlod.core.transforms import is_number
 from paramlod.errors import SceneError
 
 DEFAULT_SIZE_PX = 2.0   # the surfel size of the default strategy (paramlod.surfels.FixedSize)
@@ -31,7 +32,7 @@ DEFAULT_BLEND = 0.5     # the hand-off completes when the law asks for 1.5 times
 
 def check_blend(blend, what: str = "add_surfels") -> float:
     """``blend`` as a float, or a SceneError naming it and the fix."""
-    if isinstance(blend, bool) or not isinstance(blend, (int, float, np.integer, np.floating)):
+    if not is_number(blend):
         raise SceneError(f"{what}: blend must be a number > 0 (the demand range over which the mesh takes "
                          f"over, e.g. 0.5), got {blend!r}")
     b = float(blend)

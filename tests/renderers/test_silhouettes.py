@@ -62,7 +62,8 @@ def test_hybrid_keeps_the_lobes_of_20_pixel_glyphs(order):
     4xSS+4xMS, the points' 4xSS and 16xSS). With 8xMS (an H100) the tess tiers take twice the
     points' samples, whose 2 x 2 subsamples put a pixel at alpha 1/2 wherever an edge passes within
     a quarter pixel of its centre: there tess reaches 0.98 / 0.98 / 0.92 and the points with quads
-    trail it by up to 0.065 (order 8), never lead it by more than 0.03."""
+    trail it by up to 0.065 (order 8); the test then asserts only that tess scores at least the
+    points' IoU less 0.03."""
     scene, cam, ref = glyph_case(order, 20)
     points = iou_of(pl.render(scene, cam, "points", settings_for("points", "hybrid")), ref)
     assert points >= 0.8
