@@ -87,11 +87,14 @@ def cmd_render(args) -> int:
 
 def drawn_variants(stats) -> str:
     """What drew a frame, from its stats: one variant, the variants that shared its key buffers
-    ("points, meshlets"), or a composite's passes in order ("tess, meshlets-gl"). A requested
-    --variant may not be what drew: meshes follow points with meshlets, tess with meshlets-gl."""
+    ("points, meshlets"), or a composite's passes in order ("tess, meshlets-gl"), each with its
+    anti-aliasing unless noAA ("points (hybrid)", "tess (4xMS)"). A requested --variant may not be
+    what drew: meshes follow points with meshlets, tess with meshlets-gl."""
     if stats.get("variant") == "composite":
-        return ", ".join(dict.fromkeys(name.split(" (")[0] for name in stats.get("order", [])))
-    return str(stats.get("variant", "?"))
+        return ", ".join(dict.fromkeys(name.replace(" (noAA)", "") for name in stats.get("order", [])))
+    ss = int(stats.get("supersample") or 1)
+    aa = stats.get("aa_effective") or stats.get("aa") or (f"{ss * ss}xSS" if ss > 1 else "noAA")
+    return str(stats.get("variant", "?")) + ("" if aa == "noAA" else f" ({aa})")
 
 
 def cmd_render_job(args) -> int:

@@ -179,15 +179,20 @@ lod = "chain"
     assert f.stats["triangles_drawn"] in per_level   # one whole level, whichever the camera asks for
 
 
-@pytest.mark.parametrize("body, variant, said", [
-    ('[[objects]]\nfunction = "sphere"\n', "meshlets", "64x48 points on"),   # meshlets draw only meshes
-    ('[[objects]]\nmesh = "meshes/ball.ply"\n', "tess", "64x48 meshlets-gl on"),   # meshes follow tess so
-    ('[[objects]]\nfunction = "sphere"\n\n[[objects]]\nmesh = "meshes/ball.ply"\n', None, "64x48 points, meshlets on"),
+SPHERE, BALL = '[[objects]]\nfunction = "sphere"\n', '[[objects]]\nmesh = "meshes/ball.ply"\n'
+
+
+@pytest.mark.parametrize("body, options, said", [
+    (SPHERE, ["--variant", "meshlets"], "64x48 points on"),   # meshlets draw only meshes
+    (BALL, ["--variant", "tess"], "64x48 meshlets-gl on"),    # meshes follow tess so
+    (SPHERE + "\n" + BALL, [], "64x48 points, meshlets on"),
+    (SPHERE, ["--aa", "4xSS"], "64x48 points (4xSS) on"),
+    (SPHERE, ["--variant", "tess", "--aa", "hybrid"], "64x48 tess (hybrid) on"),
 ])
-def test_render_says_what_drew_the_frame(files, capsys, body, variant, said):
+def test_render_says_what_drew_the_frame(files, capsys, body, options, said):
     from paramlod.app.cli import main
 
     argv = ["render", str(write(files, body)), "-o", str(files / "f.png")]
-    assert main(argv + (["--variant", variant] if variant else [])) == 0
+    assert main(argv + options) == 0
     out = capsys.readouterr().out
     assert said in out and ("render patches" in out) == ("function" in body), out
