@@ -194,11 +194,11 @@ def test_info_reports_the_gl_limits_tessellation_needs():
 
 
 def test_unusable_device_lists_devices(monkeypatch):
-    r = subprocess.run([sys.executable, "-m", "paramlod", "--cl-device", "no-such-gpu", "info"],
+    r = subprocess.run([sys.executable, "-P", "-m", "paramlod", "--cl-device", "no-such-gpu", "info"],
                        capture_output=True, text=True)
     assert r.returncode == 2
     assert "no OpenCL device matches 'no-such-gpu'" in r.stderr and "OpenCL devices found" in r.stderr
-    r = subprocess.run([sys.executable, "-m", "paramlod", "info"], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-P", "-m", "paramlod", "info"], capture_output=True, text=True,
                        env={"OCL_ICD_VENDORS": "/nonexistent", "PATH": "/usr/bin:/bin",
                             "POCL_DEVICES": "none", "HOME": "/tmp"})
     # either no platform at all or no device: always a message with the install hint, never a traceback

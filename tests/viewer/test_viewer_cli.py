@@ -169,7 +169,7 @@ def test_no_display_names_the_headless_alternatives(capsys, no_display):
 
 def test_a_display_that_cannot_be_reached_is_one_line():
     env = {**__import__("os").environ, "DISPLAY": ":987"}   # no X server there
-    r = subprocess.run([sys.executable, "-m", "paramlod", "view", "sphere"], capture_output=True, text=True, env=env,
+    r = subprocess.run([sys.executable, "-P", "-m", "paramlod", "view", "sphere"], capture_output=True, text=True, env=env,
                        timeout=300)
     assert r.returncode == 2, r.stderr
     assert r.stderr.startswith("paramlod: error: cannot open a window on display ':987'") and "--record" in r.stderr

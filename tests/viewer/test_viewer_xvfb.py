@@ -81,7 +81,7 @@ def test_a_real_window_draws_what_the_keys_ask(display):
 def test_the_command_records_from_a_window(display, tmp_path):
     script = tmp_path / "s.toml"
     script.write_text('frames = 3\n[[event]]\nframe = 1\nkey = "W"\naction = "press"\n')
-    r = subprocess.run([sys.executable, "-m", "paramlod", "view", "sphere", "--size", "64x48", "--script", str(script),
+    r = subprocess.run([sys.executable, "-P", "-m", "paramlod", "view", "sphere", "--size", "64x48", "--script", str(script),
                         "--record", str(tmp_path / "rec")], env=env_for(display), capture_output=True, text=True,
                        timeout=600, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
