@@ -322,6 +322,9 @@ def load_scene(path, size=None) -> SceneFile:
                 "t0": ck.num(anim, "t0", "animation", "animation", default=0.0),
                 "t1": ck.num(anim, "t1", "animation", "animation", default=1.0),
                 "fps": ck.num(anim, "fps", "animation", "animation", default=8, lo=1, hi=60)}
+        if anim["t1"] == anim["t0"]:
+            ck.fail("animation.t1", f"must differ from t0 = {anim['t0']:g}: time would not move "
+                    "(t1 < t0 plays the animation backwards)", "animation", None, "t1")
     return SceneFile(scene, camera, settings, variant, path, mixed, meta, anim)
 
 

@@ -127,6 +127,15 @@ def test_every_builder_the_shipped_scenes_name_is_registered():
 
 
 # --- types in scene files --------------------------------------------------------------------------
+def test_an_animation_whose_time_does_not_move_is_refused(work):
+    p = work / "t.toml"
+    p.write_text(SPHERE + "\n[animation]\nt0 = 1.5\nt1 = 1.5\n")
+    with pytest.raises(pl.SceneError, match=r"t\.toml:\d+: animation\.t1: must differ from t0 = 1\.5"):
+        load_scene(p)
+    p.write_text(SPHERE + "\n[animation]\nt0 = 1.5\nt1 = 0.5\n")
+    assert load_scene(p).animation["t1"] == 0.5   # backwards
+
+
 @pytest.mark.parametrize("value", ["true", '"0.9"', "[true, 1]", "{ a = 1 }", "nan"])
 def test_a_parameter_must_be_numbers(work, value):
     p = work / "t.toml"
