@@ -52,11 +52,11 @@ def test_cse_code_equals_the_numpy_twin_for_every_builtin_and_sh_order():
 def test_the_surface_split_gives_pl_surface_bit_for_bit():
     # a point renderer evaluates split functions in two parts (the axis steps once per grid line),
     # the LOD stage and the grid tessellator their positions: the samples must be the ones
-    # pl_surface and pl_position give, to the bit. On PoCL they are, for every function. NVIDIA's
-    # compiler fuses multiply-adds by rules of its own: on an H100 palm_trunk's position split
-    # differed from pl_position in 28 of 1,200 coordinates (at most 23 float32 ulps)
-    # and every other function was bit for bit; a GPU may differ so in one function, by float
-    # rounding only
+    # pl_surface and pl_position give, to the bit. On PoCL they are, for every function. On an
+    # H100 palm_trunk's position split differed from pl_position in 28 of 1,200 coordinates (at
+    # most 23 float32 ulps; most likely NVIDIA's multiply-add fusion, which does not follow the
+    # source's grouping) and every other function was bit for bit: a GPU may differ so in one
+    # function, by float rounding only
     funcs = list(FUNCS.values())
     split = psplit = 0
     inexact = []
