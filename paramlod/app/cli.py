@@ -14,6 +14,7 @@ from paramlod.app.args import (Parser, add_size, add_stats, check_outputs, insta
 from paramlod.app.bench import run as bench
 from paramlod.device import context as device_context
 from paramlod.core.files import write_atomically
+from paramlod.core.frame import stats_aa
 from paramlod.errors import ParamlodError
 from paramlod.function import registry
 from paramlod.pipeline.driver import render
@@ -92,8 +93,7 @@ def drawn_variants(stats) -> str:
     what drew: meshes follow points with meshlets, tess with meshlets-gl."""
     if stats.get("variant") == "composite":
         return ", ".join(dict.fromkeys(name.replace(" (noAA)", "") for name in stats.get("order", [])))
-    ss = int(stats.get("supersample") or 1)
-    aa = stats.get("aa_effective") or stats.get("aa") or (f"{ss * ss}xSS" if ss > 1 else "noAA")
+    aa = stats_aa(stats)
     return str(stats.get("variant", "?")) + ("" if aa == "noAA" else f" ({aa})")
 
 

@@ -12,6 +12,7 @@ import numpy as np
 from paramlod.app.args import add_size
 from paramlod.app.scenefile import load_scene
 from paramlod.core.files import write_atomically
+from paramlod.core.frame import stats_aa
 from paramlod.device.context import cl_device
 from paramlod.errors import ParamlodError
 from paramlod.pipeline.driver import render
@@ -27,13 +28,10 @@ def add_arguments(p):
 
 
 def _aa(sf, variant: str, stats: dict) -> str:
-    if variant.startswith("tess"):
-        return stats.get("aa_effective", sf.settings.tess.aa)
     if variant == "points-ssaa":
         n = sf.settings.ssaa.ss
         return f"{n * n}xSS (local framebuffer)"
-    ss = int(stats.get("supersample", 1))
-    return f"{ss * ss}xSS" if ss > 1 else "noAA"
+    return stats_aa(stats)
 
 
 def render_scene_file(path, size=None):

@@ -52,6 +52,13 @@ class FrameStats(dict):
         self["ms"] = ms
 
 
+def stats_aa(stats) -> str:
+    """The anti-aliasing a frame (or pass) was drawn with, from its stats: tess's mode as the device
+    ran it (``aa_effective``), "hybrid", the points' supersampling ("4xSS"), else "noAA"."""
+    ss = int(stats.get("supersample") or 1)
+    return stats.get("aa_effective") or stats.get("aa") or (f"{ss * ss}xSS" if ss > 1 else "noAA")
+
+
 class Frame:
     """color: float32 (h, w, 4), linear RGB, alpha = coverage; depth: float32 (h, w), linear view
     depth, +inf = background; normal: float32 (h, w, 3), world space, facing the viewer, 0 on
