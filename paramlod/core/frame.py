@@ -25,12 +25,13 @@ class FrameStats(dict):
     """``frame.stats``: a dict whose keys every frame has (``KEYS``; ``ms`` has ``MS_KEYS``), plus
     the keys of the renderers that drew it (their counters, listed in ``passes``).
 
-    device: the OpenCL or OpenGL device; variant: the variant, or "mixed (a, b)" for a frame of
-    several passes; size: [w, h]; supersample and samples_per_pixel: of the finest pass;
-    render_patches: patches the LOD stages produced; pixels_written: pixels any sample covered;
-    passes: one dict per pass (its renderer's own counters and times), coarsest first; ms: device
-    and host times in milliseconds (``frame``: up to resolved buffers on the device; ``readback``:
-    the copy to the host, which lazy frames pay on access; ``total``: both)."""
+    device: the OpenCL or OpenGL device; variant: the variant, or "composite" for a frame
+    composited from several renderers' frames (``order`` names them); size: [w, h]; supersample
+    and samples_per_pixel: of the finest pass; render_patches: patches the LOD stages produced;
+    pixels_written: pixels any sample covered; passes: one dict per pass (its renderer's own
+    counters and times), coarsest first; ms: device and host times in milliseconds (``frame``: up
+    to resolved buffers on the device; ``readback``: the copy to the host, which lazy frames pay on
+    access; ``total``: both)."""
 
     KEYS = ("device", "variant", "size", "supersample", "samples_per_pixel", "render_patches",
             "pixels_written", "warnings", "passes", "ms")
