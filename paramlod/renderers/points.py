@@ -90,13 +90,19 @@ class DirectPointRenderer:
     # per patch. None: CPUs always pack; GPUs choose frame by frame (packs, choose_packing)
     pack = None
     groups_per_unit = None   # work-groups per compute unit; None: the device's (below)
+    # points.cl PL_GROUP_SCHEDULE: a work-group's patches scheduled with one atomic; None: GPUs only
+    # (PoCL runs a barrier as a loop over the work-items)
+    group_schedule = None
 
     def __init__(self, functions, record: bool = False):
         defines = {"PL_RECORD": 1} if record else {}
-        if cl_device().is_gpu:   # sum the counters per work-group (see the end of points_direct)
+        gpu = cl_device().is_gpu
+        if gpu:   # sum the counters per work-group (see the end of points_direct)
             defines["PL_GROUP_COUNTERS"] = 1
         else:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
             defines[POLY_TRIG] = 1
+        if gpu if self.group_schedule is None else self.group_schedule:
+            defines["PL_GROUP_SCHEDULE"] = 1
         defines["PL_RUN"] = sample_run(cl_device().is_gpu)   # points.cl patch_runs
         defines["OCC_SPAN"] = occlusion_span(cl_device().is_gpu)   # occlusion.cl occluded
         self._functions, self._defines = functions, defines

@@ -81,6 +81,42 @@ def test_packed_work_draws_the_keys_of_a_pass_per_patch(run, monkeypatch):
     np.testing.assert_array_equal(colors[0], colors[1])
 
 
+@pytest.mark.parametrize("pack", [True, False])
+def test_work_group_schedule_draws_the_keys_of_one_atomic_per_patch(pack, monkeypatch):
+    # GPUs schedule a work-group's patches with one atomic (points.cl PL_GROUP_SCHEDULE): every
+    # sample is drawn once, and the keys and samples are those of one atomic a patch; here on
+    # the CPU, with few work-groups (each schedules several passes of 64 patches) and runs of one
+    # sample, as on GPUs
+    n_dots = 64 * cl_device().device.max_compute_units + 100   # more patches than one pass of the groups
+
+    def rings():   # a new scene each time: its own programs
+        scene = ring_grid(0.12, lambda k: 0.002 + 0.001 * (k % 5), tilt=9.0)
+        at = np.tile(np.eye(4), (n_dots, 1, 1))
+        at[:, 0, 0] = at[:, 1, 1] = at[:, 2, 2] = 0.004
+        at[:, 0, 3], at[:, 1, 3] = np.linspace(-1.2, 1.2, n_dots), 0.9
+        scene.add_instances("sphere", n_dots, transforms=at)
+        return scene
+
+    cam = framing_camera(rings(), size=(160, 120))
+    monkeypatch.setattr(function_programs, "RUN_CPU", 1)
+    monkeypatch.setattr(DirectPointRenderer, "groups_per_unit", 1)
+    monkeypatch.setattr(DirectPointRenderer, "pack", pack)
+    rs = pl.RenderSettings()
+    rs.points.occlusion = False
+    colors, frames = [], []
+    for grouped in (True, False):
+        monkeypatch.setattr(DirectPointRenderer, "group_schedule", grouped)
+        colors.append(check_every_sample_once(*record_direct_points(pl.PointSettings(coverage="pixel"), cam.size,
+                                                                    rings(), cam)))
+        frame = pl.render(rings(), cam, "points", rs)   # a frame without the recording hook
+        frames.append(frame)
+    assert frames[0].stats["render_patches"] > n_dots
+    np.testing.assert_array_equal(colors[0], colors[1])
+    assert frames[0].stats["samples"] == frames[1].stats["samples"] > 0
+    np.testing.assert_array_equal(frames[0].rgb8(), frames[1].rgb8())
+    np.testing.assert_array_equal(frames[0].depth, frames[1].depth)
+
+
 def test_gpus_pack_after_frames_of_small_patches():
     # the fibre curtain's patches (19-30 samples) are drawn packed; the 19,600 glyphs' far away
     # (34) and larger ones keep a pass of the work-group each
