@@ -86,27 +86,30 @@ inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
 
 // A patch's two grid directions, as point_grid samples them and patch_units counts them.
 // Thin tubes (`curve` > 0: PointSettings.curve_factor, pixel coverage): a patch that wraps around
-// an axis whose loop measures at most 2 target pixels (at most one across) covers no pixel whole,
-// so the hole-free spacing of `factor` buys nothing around it: one line around. A loop of at
-// least 1 pixel (a tube at least half a pixel across) is also sampled along at `curve`, at most a
-// pixel apart, so the pixels it lands in stay 8-connected as a rasterized line's; thinner tubes
-// share pixels with their neighbours, and the denser samples decide which is in front
-// (docs/points.md, "Thin tubes"). v is tested first.
+// an axis whose loop measures at most THIN_LOOP_2 target pixels (a tube under a pixel across)
+// covers no pixel whole, so the hole-free spacing of `factor` buys nothing around it: one line
+// around, or two on opposite sides over THIN_LOOP_1 pixels (under a pixel apart on screen). A
+// loop of at least 1 pixel (a tube at least 1/pi pixel across) is also sampled along at `curve`,
+// at most a pixel apart, so the pixels it lands in stay 8-connected as a rasterized line's;
+// thinner tubes share pixels with their neighbours, and the denser samples decide which is in
+// front (docs/points.md, "Thin tubes"). v is tested first.
+#define THIN_LOOP_1 2.0f
+#define THIN_LOOP_2 3.0f
 inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, float factor, float curve,
                        uint measure, uint max_side, GridAxis* gu, GridAxis* gv) {
     float2 m = patch_measure(rp, measure);
     uint2 wraps = patch_wraps(rp, I, flags);
     float2 loop = m * curve;   // target pixels around
-    uint thin_v = curve > 0.0f && wraps.y && loop.y <= 2.0f;
-    uint thin_u = curve > 0.0f && !thin_v && wraps.x && loop.x <= 2.0f;
+    uint thin_v = curve > 0.0f && wraps.y && loop.y <= THIN_LOOP_2;
+    uint thin_u = curve > 0.0f && !thin_v && wraps.x && loop.x <= THIN_LOOP_2;
     float along = pl_fminf(factor, curve);
     float fu = thin_v && loop.y >= 1.0f ? along : factor, fv = thin_u && loop.x >= 1.0f ? along : factor;
     *gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, fu, max_side);
     *gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, fv, max_side);
     // one line around (2 grid lines less the wrapped copy): a second on the far side, at most a
     // pixel away, doubled the fibre curtain's samples and left its pixels and FLIP as they were
-    if (thin_u) { gu->n = min(gu->n, 2u); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
-    if (thin_v) { gv->n = min(gv->n, 2u); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
+    if (thin_u) { gu->n = min(gu->n, loop.x <= THIN_LOOP_1 ? 2u : 3u); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
+    if (thin_v) { gv->n = min(gv->n, loop.y <= THIN_LOOP_1 ? 2u : 3u); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
 #if PL_QUADS
     // quads around a tube need 3 lines around (4 grid lines with the wrapped copy): between 2 they
     // are a flat ribbon that vanishes edge on, and one line and its copy make quads without area

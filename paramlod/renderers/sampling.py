@@ -29,6 +29,9 @@ SAMPLING = ("segment", "extent")
 # per render patch, a colour per LOD step, a colour per hybrid tier
 COLOR_BY = ("material", "patch", "level", "tier")
 COVERAGE = ("centre", "pixel", "quad")   # PointSettings.coverage
+# thin tubes (points.cl patch_axes): loops around of at most THIN_LOOP_1 target pixels drawn with
+# one line around, of at most THIN_LOOP_2 (a tube under a pixel across) with two
+THIN_LOOP_1, THIN_LOOP_2 = np.float32(2), np.float32(3)
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
@@ -64,8 +67,9 @@ class PointSettings:
     # as its polygon's; docs/points.md, "Quad coverage")
     coverage: str = "pixel"
     # the direct variant with pixel coverage: a patch around which the surface closes (a periodic
-    # axis spanned whole) in a loop at most a pixel across is drawn as a curve: one line around,
-    # and samples at most a pixel apart along it where it is at least half a pixel across
+    # axis spanned whole) in a loop of at most 3 pixels (a tube under a pixel across) is drawn as a
+    # curve: one line around (two over 2 pixels), and samples at most a pixel apart along it where
+    # the loop is at least a pixel
     # (points.cl patch_axes; docs/points.md, "Thin tubes"). False: sampled as any surface
     thin_tubes: bool = True
 
@@ -197,15 +201,16 @@ def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool
     if wraps is not None and curve > 0:
         with np.errstate(invalid="ignore", over="ignore"):   # inf and NaN measures: no thin tubes
             loop = (m * curve).astype(np.float32)
-        small = wraps & (loop <= np.float32(2))
+        small = wraps & (loop <= THIN_LOOP_2)
         thin[:, 1] = small[:, 1]
         thin[:, 0] = small[:, 0] & ~small[:, 1]
     out = []
-    for k in range(2):   # sampled along at `curve` where the loop around is 1 to 2 pixels
+    for k in range(2):   # sampled along at `curve` where the loop around is 1 to 3 pixels
         curve_along = thin[:, 1 - k] & (loop[:, 1 - k] >= np.float32(1))
         along = np.where(curve_along, min(factor, curve), factor).astype(np.float32)
         n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings, along)
-        n = np.where(thin[:, k], np.minimum(n, 2), n)   # one line around (and its wrapped copy)
+        # one line around, or 2 (and the wrapped copy)
+        n = np.where(thin[:, k], np.minimum(n, np.where(loop[:, k] <= THIN_LOOP_1, 2, 3)), n)
         if wraps is None:
             out.append(n)
             continue

@@ -1,6 +1,7 @@
 """Thin tubes (``PointSettings.thin_tubes``): a patch whose surface closes around an axis in a loop
-of at most 2 target pixels is drawn by the direct variant as a curve (kernels/points/points.cl
-patch_axes; twin paramlod.renderers.sampling.grid_counts)."""
+of at most 3 target pixels is drawn by the direct variant as a curve, with one line around (2 on
+opposite sides over 2 pixels) (kernels/points/points.cl patch_axes; twin
+paramlod.renderers.sampling.grid_counts)."""
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -14,16 +15,18 @@ from conftest import check_every_sample_once, record_direct_points
 from helpers.stages import ParametricStage
 
 CAM = pl.Camera.look_at((0.0, 0.4, 3.0), (0.0, 0.0, 0.0), size=(200, 140))
-# rings whose tubes are about 0.2, 0.4, 0.6 and 1.5 pixels across: loops under 1 pixel, of 1 to 2,
-# and one that is no thin tube
-MINOR = (0.0015, 0.003, 0.0045, 0.012)
+# rings whose tubes are about 0.2, 0.4, 0.6, 1.5 and 0.8 pixels across: loops under 1 pixel, of 1
+# to 2, one that is no thin tube, and one of 2 to 3
+MINOR = (0.0015, 0.003, 0.0045, 0.012, 0.006)
+WIDE = 3   # the ring that is no thin tube
 
 
 def _rings():
     scene = pl.Scene()
     for k, minor in enumerate(MINOR):
+        x, y = (0.75 * k - 1.1, 0.1 * k - 0.15) if k < 4 else (0.0, -0.6)
         scene.add("torus", params={"major": 0.3, "minor": minor},
-                  transform=pl.translate(0.75 * k - 1.1, 0.1 * k - 0.15, 0.0) @ pl.rotate(25 + 20 * k, (1, 0.2, 0)),
+                  transform=pl.translate(x, y, 0.0) @ pl.rotate(25 + 20 * k, (1, 0.2, 0)),
                   material=pl.Material(color=(0.9, 0.5 - 0.1 * k, 0.2 + 0.2 * k)))
     return scene
 
@@ -40,7 +43,8 @@ def test_the_rings_have_loops_of_every_kind():
     rl, wraps = _render_list(_rings(), pl.RenderSettings())
     loop = rl["w"][:, 1][wraps[:, 1]]   # v, the way around the tube: all patches span it whole
     assert wraps[:, 1].all()
-    assert (loop < 1).any() and ((loop >= 1) & (loop <= 2)).any() and (loop > 2).any()
+    assert (loop < 1).any() and ((loop >= 1) & (loop <= 2)).any() and ((loop > 2) & (loop <= 3)).any()
+    assert (loop > 3).any()
 
 
 def test_the_kernel_samples_the_curves_the_twin_counts():
@@ -60,9 +64,9 @@ def test_thin_tubes_keep_their_pixels_with_fewer_samples():
     rs_off.points.thin_tubes = False
     on, off = (pl.render(_rings(), CAM, "points", rs) for rs in (rs_on, rs_off))
     # the frames took the samples the twin counts, and the thin rings (not the last) under half of
-    # them: one line around instead of 2-3
+    # them: one or 2 lines around instead of 2-5
     rl, wraps = _render_list(_rings(), rs_on)
-    thin = rl["inst"] < len(MINOR) - 1
+    thin = rl["inst"] != WIDE
     counts = []
     for frame, rs in ((on, rs_on), (off, rs_off)):
         nu, nv = grid_counts(rl, rs.points, wraps=wraps)
@@ -80,30 +84,31 @@ def test_thin_tubes_keep_their_pixels_with_fewer_samples():
         assert 40 < area <= mine_on.sum() <= mine_off.sum(), k
         assert ndimage.label(mine_on, structure=np.ones((3, 3)))[1] == 1, k
     # the ring that is no thin tube is drawn as before, bit for bit
-    wide = off.object_id == len(MINOR)
+    wide = off.object_id == WIDE + 1
     np.testing.assert_array_equal(on.rgb8()[wide], off.rgb8()[wide])
 
 
 def test_grid_counts_by_hand():
-    # one patch wrapping v, 40 px long along u; loops of 0.8, 1.5 and 2.5 px around
-    rl = np.zeros(3, RENDER_DTYPE)
+    # one patch wrapping v, 40 px long along u; loops of 0.8, 1.5, 2.5 and 3.5 px around
+    rl = np.zeros(4, RENDER_DTYPE)
     rl["ext"][:, 2] = rl["w"][:, 0] = 40.0
-    rl["w"][:, 1] = rl["ext"][:, 3] = (0.8, 1.5, 2.5)
-    wraps = np.array([[False, True]] * 3)
+    rl["w"][:, 1] = rl["ext"][:, 3] = (0.8, 1.5, 2.5, 3.5)
+    wraps = np.array([[False, True]] * 4)
     on = pl.PointSettings()
     nu, nv = grid_counts(rl, on, wraps=wraps)
     # 0.8: 3 lines (ceil(1.2) + 1) capped at 2, less the wrap; along at density: ceil(40 * 1.5) + 1
     # 1.5: 4 lines (ceil(2.25) + 1) capped at 2, less the wrap; along a pixel apart: 40 + 1
-    # 2.5: a surface, 5 lines less the wrap
-    assert nv.tolist() == [1, 1, 4] and nu.tolist() == [61, 41, 61]
+    # 2.5: 5 lines capped at 3, less the wrap: 2 on opposite sides; along a pixel apart
+    # 3.5: a surface, 7 lines less the wrap
+    assert nv.tolist() == [1, 1, 2, 6] and nu.tolist() == [61, 41, 41, 61]
     off = grid_counts(rl, pl.PointSettings(thin_tubes=False), wraps=wraps)
-    assert [x.tolist() for x in off] == [[61, 61, 61], [2, 3, 4]]
+    assert [x.tolist() for x in off] == [[61, 61, 61, 61], [2, 3, 4, 6]]
     # pixel-centre and quad coverage rasterize cells, which a one-line tube would lack: no curves;
     # quads take 3 lines around a tube at least
     centre, quad = pl.PointSettings(coverage="centre"), pl.PointSettings(coverage="quad")
     assert centre.curve_factor() == quad.curve_factor() == 0
     assert [x.tolist() for x in grid_counts(rl, centre, wraps=wraps)] == [x.tolist() for x in off]
-    assert [x.tolist() for x in grid_counts(rl, quad, wraps=wraps)] == [[61, 61, 61], [3, 3, 4]]
+    assert [x.tolist() for x in grid_counts(rl, quad, wraps=wraps)] == [[61, 61, 61, 61], [3, 3, 4, 6]]
     # a hybrid tier's target is `scale` times the measured pixels: the loop is measured in it
     assert on.curve_factor(2) == 2 * on.curve_factor() == 2
 
