@@ -32,6 +32,7 @@ COVERAGE = ("centre", "pixel", "quad")   # PointSettings.coverage
 # thin tubes (points.cl patch_axes): loops around of at most THIN_LOOP_1 target pixels drawn with
 # one line around, of at most THIN_LOOP_2 (a tube under a pixel across) with two
 THIN_LOOP_1, THIN_LOOP_2 = np.float32(2), np.float32(3)
+THIN_ALONG = np.float32(1.2)   # samples per target pixel along them (points.cl: the measure's chords)
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
@@ -68,7 +69,7 @@ class PointSettings:
     coverage: str = "pixel"
     # the direct variant with pixel coverage: a patch around which the surface closes (a periodic
     # axis spanned whole) in a loop of at most 3 pixels (a tube under a pixel across) is drawn as a
-    # curve: one line around (two over 2 pixels), and samples at most a pixel apart along it where
+    # curve: one line around (two over 2 pixels), and samples under a pixel apart along it where
     # the loop is at least a pixel
     # (points.cl patch_axes; docs/points.md, "Thin tubes"). False: sampled as any surface
     thin_tubes: bool = True
@@ -106,8 +107,8 @@ class PointSettings:
         return np.float32(self.density * self.oversample * scale / (1.0 - self.epsilon))
 
     def curve_factor(self, scale: float = 1.0) -> np.float32:
-        """The kernels' ``curve``: samples per measured pixel along a thin tube (``factor`` without
-        ``density``: a pixel apart at most), 0 where thin tubes are off (``thin_tubes`` False, or a
+        """The kernels' ``curve``: target pixels per measured pixel (``factor`` without ``density``;
+        thin tubes are sampled THIN_ALONG times that along), 0 where thin tubes are off (``thin_tubes`` False, or a
         coverage other than "pixel", whose cells would lose the tube's width)."""
         if not self.thin_tubes or self.coverage != "pixel":
             return np.float32(0)
@@ -205,9 +206,9 @@ def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool
         thin[:, 1] = small[:, 1]
         thin[:, 0] = small[:, 0] & ~small[:, 1]
     out = []
-    for k in range(2):   # sampled along at `curve` where the loop around is 1 to 3 pixels
+    for k in range(2):   # sampled along at THIN_ALONG x `curve` where the loop around is 1 to 3 pixels
         curve_along = thin[:, 1 - k] & (loop[:, 1 - k] >= np.float32(1))
-        along = np.where(curve_along, min(factor, curve), factor).astype(np.float32)
+        along = np.where(curve_along, min(factor, THIN_ALONG * curve), factor).astype(np.float32)
         n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings, along)
         # one line around, or 2 (and the wrapped copy)
         n = np.where(thin[:, k], np.minimum(n, np.where(loop[:, k] <= THIN_LOOP_1, 2, 3)), n)

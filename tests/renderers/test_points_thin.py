@@ -88,6 +88,22 @@ def test_thin_tubes_keep_their_pixels_with_fewer_samples():
     np.testing.assert_array_equal(on.rgb8()[wide], off.rgb8()[wide])
 
 
+@pytest.mark.parametrize("minor, angle", [(0.003, 75), (0.0045, 75), (0.0045, 85)])
+def test_thin_rings_seen_near_edge_on_stay_connected(minor, angle):
+    # the measure sums the LOD segments' chords, which fall short of the fastest part of a ring
+    # seen near edge on: at one sample a measured pixel along, these rings (drawn with one line
+    # around) had a 1-pixel gap; THIN_ALONG samples a pixel close it
+    scene = pl.Scene()
+    scene.add("torus", params={"major": 0.3, "minor": minor},
+              transform=pl.translate(0.3, -0.1, 0.0) @ pl.rotate(angle, (1, 0.25 if angle == 75 else 0.2, 0.05 if angle == 75 else 0)))
+    frame = pl.render(scene, CAM, "points")
+    rl, wraps = _render_list(scene, pl.RenderSettings())
+    assert wraps[:, 1].all() and (rl["w"][:, 1] <= 2).all()   # one line around
+    ring = frame.object_id == 1
+    assert ring.sum() > 50
+    assert ndimage.label(ring, structure=np.ones((3, 3)))[1] == 1
+
+
 def test_grid_counts_by_hand():
     # one patch wrapping v, 40 px long along u; loops of 0.8, 1.5, 2.5 and 3.5 px around
     rl = np.zeros(4, RENDER_DTYPE)
@@ -97,10 +113,10 @@ def test_grid_counts_by_hand():
     on = pl.PointSettings()
     nu, nv = grid_counts(rl, on, wraps=wraps)
     # 0.8: 3 lines (ceil(1.2) + 1) capped at 2, less the wrap; along at density: ceil(40 * 1.5) + 1
-    # 1.5: 4 lines (ceil(2.25) + 1) capped at 2, less the wrap; along a pixel apart: 40 + 1
-    # 2.5: 5 lines capped at 3, less the wrap: 2 on opposite sides; along a pixel apart
+    # 1.5: 4 lines (ceil(2.25) + 1) capped at 2, less the wrap; along 1.2 a pixel: ceil(40 * 1.2) + 1
+    # 2.5: 5 lines capped at 3, less the wrap: 2 on opposite sides; along 1.2 a pixel
     # 3.5: a surface, 7 lines less the wrap
-    assert nv.tolist() == [1, 1, 2, 6] and nu.tolist() == [61, 41, 41, 61]
+    assert nv.tolist() == [1, 1, 2, 6] and nu.tolist() == [61, 49, 49, 61]
     off = grid_counts(rl, pl.PointSettings(thin_tubes=False), wraps=wraps)
     assert [x.tolist() for x in off] == [[61, 61, 61, 61], [2, 3, 4, 6]]
     # pixel-centre and quad coverage rasterize cells, which a one-line tube would lack: no curves;
