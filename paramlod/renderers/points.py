@@ -103,8 +103,8 @@ class DirectPointRenderer:
             defines[POLY_TRIG] = 1
         if gpu if self.group_schedule is None else self.group_schedule:
             defines["PL_GROUP_SCHEDULE"] = 1
-        defines["PL_RUN"] = sample_run(cl_device().is_gpu)   # points.cl patch_runs
-        defines["OCC_SPAN"] = occlusion_span(cl_device().is_gpu)   # occlusion.cl occluded
+        defines["PL_RUN"] = sample_run(gpu)   # points.cl patch_runs
+        defines["OCC_SPAN"] = occlusion_span(gpu)   # occlusion.cl occluded
         self._functions, self._defines = functions, defines
         self._auto_pack = self.pack is None and cl_device().is_gpu
         self.packed = not cl_device().is_gpu if self.pack is None else bool(self.pack)

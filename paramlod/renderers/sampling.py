@@ -70,8 +70,8 @@ class PointSettings:
     # the direct variant with pixel coverage: a patch around which the surface closes (a periodic
     # axis spanned whole) in a loop of at most 3 pixels (a tube under a pixel across) is drawn as a
     # curve: one line around (two over 2 pixels), and samples under a pixel apart along it where
-    # the loop is at least a pixel
-    # (points.cl patch_axes; docs/points.md, "Thin tubes"). False: sampled as any surface
+    # the loop is at least a pixel (points.cl patch_axes; docs/points.md, "Thin tubes"). False:
+    # sampled as any surface
     thin_tubes: bool = True
 
     def validate(self):
@@ -108,8 +108,9 @@ class PointSettings:
 
     def curve_factor(self, scale: float = 1.0) -> np.float32:
         """The kernels' ``curve``: target pixels per measured pixel (``factor`` without ``density``;
-        thin tubes are sampled THIN_ALONG times that along), 0 where thin tubes are off (``thin_tubes`` False, or a
-        coverage other than "pixel", whose cells would lose the tube's width)."""
+        thin tubes are sampled THIN_ALONG times that along), 0 where thin tubes are off
+        (``thin_tubes`` False, or a coverage other than "pixel", whose cells would lose the tube's
+        width)."""
         if not self.thin_tubes or self.coverage != "pixel":
             return np.float32(0)
         return np.float32(self.oversample * scale / (1.0 - self.epsilon))
