@@ -22,26 +22,34 @@ def is_number(x) -> bool:
     return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
 
 
-def check_values(values, what: str) -> np.ndarray:
+def check_values(values, what: str, stacked: bool = False) -> np.ndarray:
     """``values`` as float64, refused (SceneError naming ``what``) unless finite and within
-    PLACE_LIMIT."""
+    PLACE_LIMIT. ``stacked``: ``values`` is a stack of matrices, and the error names the first bad
+    one's index and shows it alone."""
     try:
         a = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError):
         raise SceneError(f"{what} must be numbers, got {values!r}") from None
-    if not np.all(np.isfinite(a)):
-        raise SceneError(f"{what} must be finite, got {np.array2string(a.ravel(), precision=6)}")
-    big = float(np.abs(a).max(initial=0.0))
-    if big > PLACE_LIMIT:
-        raise SceneError(f"{what} has a value of magnitude {big:.3g}, beyond {PLACE_LIMIT:.0e}: float32 "
+    stack = stacked and a.ndim == 3
+    rows = a.reshape(a.shape[0], a[0].size if len(a) else 0) if stack else a.reshape(1, -1)
+    bad = ~np.isfinite(rows).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        which = f"{what} [{k}]" if stack else what
+        raise SceneError(f"{which} must be finite, got {np.array2string(rows[k], precision=6)}")
+    big = np.abs(rows).max(axis=1, initial=0.0)
+    if (big > PLACE_LIMIT).any():
+        k = int(np.argmax(big))
+        which = f"{what} [{k}]" if stack else what
+        raise SceneError(f"{which} has a value of magnitude {big[k]:.3g}, beyond {PLACE_LIMIT:.0e}: float32 "
                          "cannot place geometry there (move the object or the camera nearer the origin)")
     return a
 
 
 def check_transform(m, what: str = "a transform") -> np.ndarray:
     """A finite, invertible 4x4 (or [n, 4, 4]) matrix within PLACE_LIMIT, else a SceneError
-    naming ``what``."""
-    a = check_values(m, what)
+    naming ``what`` (and in a stack the index of the first bad matrix)."""
+    a = check_values(m, what, stacked=True)
     if a.shape[-2:] != (4, 4):
         raise SceneError(f"{what} must be a 4x4 matrix, got shape {a.shape}")
     # the renderers apply a transform's top three rows (affine); a projective bottom row would be ignored

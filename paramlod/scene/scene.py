@@ -29,7 +29,7 @@ from paramlod.scene.loaders import load
 from paramlod.scene.meshes import source_key, source_label
 from paramlod.core.color import srgb_to_linear
 from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
-from paramlod.core.transforms import MIN_SCALE, PLACE_LIMIT, check_transform, check_values, is_number, matrix as _as_matrix
+from paramlod.core.transforms import check_transform, check_values, is_number, matrix as _as_matrix
 
 # Per-instance float record (paramlod.core.layouts.INSTANCE_F, INST_* in the kernels' prelude):
 # 4x4 model matrix (row-major), 3x4 normal matrix rows, domain (u0, u1, v0, v1).
@@ -490,17 +490,9 @@ class Scene:
             n = len(models)
             f = np.zeros((n, INST_FLOATS), np.float32)
             f[:, 0:16] = models.reshape(n, 16)
-            if n and float(np.abs(models).max()) > PLACE_LIMIT:   # parts placed on parts can add up
-                k = int(np.argmax(np.abs(models).reshape(n, -1).max(axis=1)))
-                raise SceneError(f"'{fn.name}': instance {k}'s transform places it beyond {PLACE_LIMIT:.0e}, "
-                                 "where float32 cannot place geometry")
+            # each factor was checked; parts placed on parts can add up (or scale down) beyond the limits
+            check_transform(models, f"'{fn.name}': the instances' transforms (parts' and instances' multiplied)")
             lin = models[:, :3, :3]
-            det = np.abs(np.linalg.det(lin))
-            if np.any(det < MIN_SCALE ** 3):   # the limit check_transform puts on each factor
-                k = int(np.argmin(det))
-                raise SceneError(f"'{fn.name}': instance {k}'s transform (its parts' and instances' transforms "
-                                 f"multiplied) must be invertible with a scale above {MIN_SCALE:.0e} (its 3x3 part "
-                                 f"has determinant {float(det[k]):.3g})")
             nrm = np.transpose(np.linalg.inv(lin), (0, 2, 1))
             f[:, 16:28] = np.concatenate([nrm, np.zeros((n, 3, 1))], axis=2).reshape(n, 12)
             f[:, 28:32] = [*fn.u_range, *fn.v_range]

@@ -94,8 +94,8 @@ def test_scene_names_the_object_and_field_of_a_bad_transform():
         s.add("sphere", transform=np.diag([1e-30, 1e-30, 1e-30, 1.0]))
     many = np.tile(np.eye(4), (3, 1, 1))
     many[1, 0, 3] = np.nan
-    with pytest.raises(pl.SceneError, match="'sphere': transforms must be finite"):
-        s.add_instances("sphere", 3, transforms=many)
+    with pytest.raises(pl.SceneError, match=r"'sphere': transforms \[1\] must be finite, got \[ *1\. +0\. +0\. +nan"):
+        s.add_instances("sphere", 3, transforms=many)   # the bad matrix named and shown alone
     # each within the limit, together beyond it
     many = np.tile(pl.translate(0, 0, 0.9 * PLACE_LIMIT), (3, 1, 1))
     with pytest.raises(pl.SceneError, match="'sphere': transform @ transforms"):
@@ -114,6 +114,24 @@ def test_scene_names_the_object_and_field_of_a_bad_transform():
         s.add_instances("sphere", 3, transforms=many)
     assert s.object_count == 0
     s.add("sphere", transform=pl.rotate(30, (1, 1, 0)) @ pl.translate(1, 2, 3) @ pl.scale(0.3))   # products stay affine
+
+
+@pytest.mark.parametrize("part, placed, error", [
+    (pl.translate(0.9 * PLACE_LIMIT, 0, 0), pl.translate(0.9 * PLACE_LIMIT, 0, 0), r"\[1\] has a value of magnitude 1\.8e\+15"),
+    (pl.scale(1e-10), pl.scale(1e-10), r"\[1\] must be invertible with a scale above 1e-15"),
+])
+def test_parts_placed_on_parts_beyond_the_limits_are_refused(part, placed, error):
+    # each transform is within the limits, the part's composed with its parent's is not: the
+    # frame's instance buffers name the function and the instance
+    @pl.parametric(parts=[pl.Part("sphere", at=(0.5, 0.5), transform=part)])
+    def stand(u, v):
+        return u, v, 0
+
+    s = pl.Scene()
+    s.add_instances(stand, 2, transforms=np.stack([np.eye(4), placed]))
+    with pytest.raises(pl.SceneError, match=r"'sphere': the instances' transforms \(parts' and instances' "
+                                            r"multiplied\) " + error):
+        s.instance_buffers()
 
 
 def test_parameters_beyond_float32_are_refused():
