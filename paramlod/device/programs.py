@@ -84,12 +84,13 @@ def build(files: list[str], defines: dict | None = None, options: tuple = (), ge
     return prog
 
 
-_timing: list | None = None   # kernel events of the current measurement, when one is running
+_timing: list | None = None   # (kernel, event) of the current measurement, when one is running
 
 
 class TimedKernel:
     """A cl.Kernel whose launches can be timed (``start_timing`` / ``stop_timing``): the benchmark
-    uses the summed kernel durations to separate device time from host (Python) time."""
+    uses the kernels' durations to separate device time from host (Python) time, and to show
+    where the device time goes."""
 
     def __init__(self, k):
         self.k = k
@@ -97,7 +98,7 @@ class TimedKernel:
     def __call__(self, *args, **kw):
         evt = self.k(*args, **kw)
         if _timing is not None:
-            _timing.append(evt)
+            _timing.append((self.k, evt))
         return evt
 
     def __getattr__(self, name):
@@ -109,7 +110,7 @@ def launch(queue, k, global_size, local_size=None):
     recorded like TimedKernel launches while a measurement runs."""
     evt = cl.enqueue_nd_range_kernel(queue, k, global_size, local_size)
     if _timing is not None:
-        _timing.append(evt)
+        _timing.append((k, evt))
     return evt
 
 
@@ -118,11 +119,16 @@ def start_timing() -> None:
     _timing = []
 
 
-def stop_timing() -> float:
-    """Milliseconds the recorded kernels ran on the device (waits for them)."""
+def stop_timing() -> dict[str, float]:
+    """Milliseconds each recorded kernel ran on the device, by name, summed over its launches
+    (waits for them; the names are read here, not at launch, which the measured frame pays)."""
     global _timing
-    events, _timing = _timing or [], None
-    return events_ms(events)
+    recorded, _timing = _timing or [], None
+    out: dict[str, float] = {}
+    for k, evt in recorded:
+        name = k.function_name
+        out[name] = out.get(name, 0.0) + events_ms([evt])
+    return out
 
 
 def events_ms(events) -> float:

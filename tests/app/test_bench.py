@@ -15,7 +15,14 @@ def test_bench_writes_json_markdown_and_per_distance_rows(tmp_path):
         assert r["frames"] == 2 and r["render_patches"] > 0 and r["pixels_written"] > 0
         assert len(r["lod_steps_in"]) == 12 and r["lod_steps_in"][0] == 1
     assert rows[0]["pixels_written"] > rows[1]["pixels_written"]      # nearer covers more
-    assert "| sphere | points | 0.6 |" in (tmp_path / "results.md").read_text()
+    # where the device time goes: each kernel's ms a frame, the largest first
+    for r in rows:
+        ms = list(r["kernel_ms"].values())
+        assert {"lod_step", "points_schedule", "points_direct", "resolve"} <= set(r["kernel_ms"])
+        assert ms == sorted(ms, reverse=True) and min(ms) >= 0 and max(ms) <= r["cl_kernel_ms"]
+    md = (tmp_path / "results.md").read_text()
+    assert "| sphere | points | 0.6 |" in md
+    assert "Device ms a frame by OpenCL kernel" in md and "| sphere | points | 1.5 | " in md
 
 
 def test_bench_measures_supersampled_points(tmp_path):

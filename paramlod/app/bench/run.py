@@ -216,9 +216,9 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         cam = _orbit(base, centre, dist, k, args.frames, size)
         start_timing()
         stats = render_on_device(scene, cam, variant, rs)
-        kernel_ms = stop_timing()
+        kernels = stop_timing()
         if k >= args.warmup:
-            rows.append((stats, kernel_ms))
+            rows.append((stats, sum(kernels.values()), kernels))
     st = [r[0] for r in rows]
     # the frame's image read back, then the rest of its arrays
     extra = render(scene, cam, variant, rs)
@@ -235,6 +235,10 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         "lod_ms": med(s["ms"].get("lod", 0.0) for s in st),
         "render_ms": med(s["ms"]["render"] for s in st),
         "cl_kernel_ms": med(r[1] for r in rows),
+        # each OpenCL kernel's device ms a frame (summed over its launches), largest first: where
+        # the frame's device time goes
+        "kernel_ms": dict(sorted(((name, med(r[2].get(name, 0.0) for r in rows))
+                                  for name in {n for r in rows for n in r[2]}), key=lambda kv: -kv[1])),
         "render_patches": med(s.get("render_patches", 0) for s in st),
         "lod_steps_in": [med(s["lod_steps"][i]["in"] for s in st) for i in range(len(st[0].get("lod_steps", [])))],
         "samples": med(s.get("samples", 0) for s in st),
@@ -438,6 +442,7 @@ def format_markdown(result) -> str:
                 lines.append(f"| {name} | {label} | {r['distance']} | {r['fps']:.0f} | {r['frame_ms']:.2f} "
                              f"({r['frame_ms_p95']:.2f}) | {r['lod_ms']:.2f} | {r['render_ms']:.2f} | {host} | "
                              f"{r['render_patches']:.0f} | {spp} | {frac} |")
+    lines += format_kernels(result["scenarios"])
     lines += format_culling(result["scenarios"])
     if "function_throughput" in result:
         lines += format_function_throughput(result["function_throughput"])
@@ -461,6 +466,21 @@ def format_markdown(result) -> str:
     if "hybrid" in result:
         lines += format_hybrid(result["hybrid"])
     return "\n".join(lines) + "\n"
+
+
+def format_kernels(scenarios: dict, most: int = 4) -> list[str]:
+    """Per row, the ``most`` OpenCL kernels that took the most device time a frame."""
+    lines = []
+    for name, sc in scenarios.items():
+        for vname, rows in sc["variants"].items():
+            for r in rows:
+                if r.get("kernel_ms"):
+                    top = ", ".join(f"{k} {ms:.2f}" for k, ms in list(r["kernel_ms"].items())[:most])
+                    lines.append(f"| {name} | {_row_label(vname, r)} | {r['distance']} | {top} |")
+    if not lines:
+        return []
+    return ["", "Device ms a frame by OpenCL kernel (medians; the largest first; GL work is not in it):", "",
+            "| scenario | variant | distance | kernels |", "|---|---|---:|---|", *lines]
 
 
 def format_culling(scenarios: dict) -> list[str]:
