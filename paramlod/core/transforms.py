@@ -30,18 +30,17 @@ def check_values(values, what: str, stacked: bool = False) -> np.ndarray:
         a = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError):
         raise SceneError(f"{what} must be numbers, got {values!r}") from None
-    stack = stacked and a.ndim == 3
-    rows = a.reshape(a.shape[0], a[0].size if len(a) else 0) if stack else a.reshape(1, -1)
+    stack = stacked and a.ndim == 3 and a.size > 0
+    rows = a.reshape(len(a), -1) if stack else a.reshape(1, -1)   # one row a matrix, or one in all
+    name = (lambda k: f"{what} [{k}]") if stack else (lambda k: what)
     bad = ~np.isfinite(rows).all(axis=1)
     if bad.any():
         k = int(np.argmax(bad))
-        which = f"{what} [{k}]" if stack else what
-        raise SceneError(f"{which} must be finite, got {np.array2string(rows[k], precision=6)}")
+        raise SceneError(f"{name(k)} must be finite, got {np.array2string(rows[k], precision=6)}")
     big = np.abs(rows).max(axis=1, initial=0.0)
     if (big > PLACE_LIMIT).any():
         k = int(np.argmax(big))
-        which = f"{what} [{k}]" if stack else what
-        raise SceneError(f"{which} has a value of magnitude {big[k]:.3g}, beyond {PLACE_LIMIT:.0e}: float32 "
+        raise SceneError(f"{name(k)} has a value of magnitude {big[k]:.3g}, beyond {PLACE_LIMIT:.0e}: float32 "
                          "cannot place geometry there (move the object or the camera nearer the origin)")
     return a
 

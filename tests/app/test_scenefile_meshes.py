@@ -8,6 +8,7 @@ import pytest
 import trimesh
 
 import paramlod as pl
+from paramlod.app.cli import main
 from paramlod.app.scenefile import load_scene
 
 
@@ -190,8 +191,6 @@ SPHERE, BALL = '[[objects]]\nfunction = "sphere"\n', '[[objects]]\nmesh = "meshe
     (SPHERE, ["--variant", "tess", "--aa", "hybrid"], "64x48 tess (hybrid) on"),
 ])
 def test_render_says_what_drew_the_frame(files, capsys, body, options, said):
-    from paramlod.app.cli import main
-
     argv = ["render", str(write(files, body)), "-o", str(files / "f.png")]
     assert main(argv + options) == 0
     out = capsys.readouterr().out
