@@ -5,6 +5,12 @@
 
 #include "common/debug_color.cl"
 
+// THIN_LOOP_1, THIN_LOOP_2, THIN_ALONG, COVER_REACH, COVER_OWN and POINTS_LOCAL come from the
+// build (paramlod.renderers.sampling.points_cl_defines), where the numpy twins read them too
+#ifndef POINTS_LOCAL
+#error "build points.cl with paramlod.renderers.sampling.points_cl_defines()"
+#endif
+
 // The debug colouring of the direct variant (PointSettings.color_by): 1 a colour per render patch,
 // keyed by its parameter range and instance (the render list's order varies between devices and
 // frames, its patches do not), 2 a colour per LOD step the patch was made in, 3 a colour per
@@ -93,12 +99,10 @@ inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
 // THIN_ALONG x `curve`, under a pixel apart, so the pixels it lands in stay 8-connected as a
 // rasterized line's; thinner tubes share pixels with their neighbours, and the denser samples
 // decide which is in front (docs/points.md, "Thin tubes"). v is tested first.
-#define THIN_LOOP_1 2.0f
-#define THIN_LOOP_2 3.0f
-// samples per target pixel along a thin tube: the measure sums chords of the LOD stage's segments,
-// which fall short of the fastest part of a curve (a ring seen near edge on: up to ~14 %); at one
-// a pixel, 4 of 108 thin rings seen at 75-85 degrees came out with a 1-pixel gap, at 1.1 none
-#define THIN_ALONG 1.2f
+// THIN_ALONG (samples per target pixel along a thin tube) is over one because the measure sums
+// chords of the LOD stage's segments, which fall short of the fastest part of a curve (a ring seen
+// near edge on: up to ~14 %); at one a pixel, 4 of 108 thin rings seen at 75-85 degrees came out
+// with a 1-pixel gap, at 1.1 none
 inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, float factor, float curve,
                        uint measure, uint max_side, GridAxis* gu, GridAxis* gv) {
     float2 m = patch_measure(rp, measure);
@@ -284,8 +288,8 @@ inline int point_eval_partials(uint func, __global const float* P, __global cons
 // cells tile the patch, so the points' silhouette is the surface's, not the surface grown by up
 // to a pixel as when a sample covers the pixel it lands in.
 #define COVER_MARGIN 1.3f    // cells overlap by 15 % of a step on each side
-#define COVER_REACH 2        // pixels from the sample's own that a cell may reach
-#define COVER_OWN 0x80000000u   // cover_cells: the cell is degenerate; the own pixel
+// COVER_REACH: pixels from the sample's own that a cell may reach; COVER_OWN (cover_cells): the
+// cell is degenerate, the own pixel
 
 // the screen-space image (pixels) of the world-space direction d at the placed sample p
 inline float2 screen_dir(__global const float* cam, Placed p, float3 d) {
@@ -516,7 +520,6 @@ inline int point_sample(uint func, __global const float* P, __global const float
 
 // Sums four per-work-item counters over the work-group in local memory, then one atom_add each:
 // global atomics from every work-item on the same four addresses would serialise.
-#define POINTS_LOCAL 64   // work-group size of points_direct (paramlod/points.py LOCAL_SIZE)
 inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* red) {
     uint l = get_local_id(0);
     red[l] = mine;

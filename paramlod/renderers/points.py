@@ -15,17 +15,17 @@ from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import POINT_TIERS, tier_divisors
 from paramlod.renderers.occlusion import OcclusionCuller, occlusion_span
 from paramlod.renderers.registry import RendererSpec, register_renderer
-from paramlod.renderers.sampling import COLOR_BY, PointSettings, grid_counts, patch_wraps, side_counts  # noqa: F401  (re-exported)
+from paramlod.renderers.sampling import (COLOR_BY, POINTS_LOCAL, PointSettings, grid_counts, patch_wraps,  # noqa: F401  (re-exported)
+                                         points_cl_defines, side_counts)
 from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
 from paramlod.function.programs import POLY_TRIG, VECTOR, build, sample_run
 
-LOCAL_SIZE = 64
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
 COUNTER_WORDS = len(COUNTERS) + 2   # and points.cl SCHED_AT, UNITS_AT
 # points.cl order[]: a patch's first unit in 32 bits (and a work-item's unit may pass the last by
 # POINTS_LOCAL); points_direct draws nothing of a list past it
-MAX_UNITS = 0xFFFFFFFF - LOCAL_SIZE
+MAX_UNITS = 0xFFFFFFFF - POINTS_LOCAL
 # occlusion = "auto": culling is used while it saves at least this share of a frame's samples
 # (measured on the H200, docs/points.md: culling that removed 6 % of the samples cost 7 % of the
 # frame, 13-30 % paid 1.18-1.38x; the pyramid and the second pass cost 0.3-0.6 ms a frame)
@@ -35,7 +35,7 @@ AUTO_PROBE = 16   # every 16th frame is drawn the other way, so the choice follo
 # samples than half a work-group on average: on an H200 packing took the fibre curtain's render
 # (19-30 samples a patch) to 0.48-0.83x, and the 19,600 glyphs' at 34 a patch to 1.06x
 # (docs/points.md, "Packed work")
-PACK_BELOW = LOCAL_SIZE // 2
+PACK_BELOW = POINTS_LOCAL // 2
 
 
 def packs(samples: int, patches: int) -> bool:
@@ -95,7 +95,9 @@ class DirectPointRenderer:
     group_schedule = None
 
     def __init__(self, functions, record: bool = False):
-        defines = {"PL_RECORD": 1} if record else {}
+        defines = points_cl_defines()
+        if record:
+            defines["PL_RECORD"] = 1
         gpu = cl_device().is_gpu
         if gpu:   # sum the counters per work-group (see the end of points_direct)
             defines["PL_GROUP_COUNTERS"] = 1
@@ -202,9 +204,9 @@ class DirectPointRenderer:
                                 self._order, self.counters)
             k.kernel.set_args(*args)
             k.bound = bound
-        items = min(-(-capacity // LOCAL_SIZE), self.max_groups) * LOCAL_SIZE
-        events = (launch(q, k.schedule, (items,), (LOCAL_SIZE,)),
-                  launch(q, k.kernel, (self.max_groups * LOCAL_SIZE,), (LOCAL_SIZE,)))
+        items = min(-(-capacity // POINTS_LOCAL), self.max_groups) * POINTS_LOCAL
+        events = (launch(q, k.schedule, (items,), (POINTS_LOCAL,)),
+                  launch(q, k.kernel, (self.max_groups * POINTS_LOCAL,), (POINTS_LOCAL,)))
         self.events = events if phase == 0 else (self.events[0], events[1])
 
     def device_ms(self) -> float:

@@ -28,7 +28,7 @@ from paramlod.lod.stage import LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import LFB_MODES, local_framebuffer_ss
 from paramlod.renderers.registry import RendererSpec, register_renderer
-from paramlod.renderers.sampling import PointSettings
+from paramlod.renderers.sampling import PointSettings, points_cl_defines
 from paramlod.renderers.shading import LIGHT
 from paramlod.renderers.targets import srgb_device_tables
 
@@ -114,7 +114,8 @@ class LocalFramebufferRenderer:
                 raise DeviceError(f"points-ssaa with {ss}x{ss} subsamples, {self.tile}-px tiles and chunks of "
                                   f"{self.chunk} needs {need} bytes of local memory; the device has {have}. "
                                   "Use ss=2, a smaller tile or a smaller chunk.")
-            defines = {"PL_SS": ss, "PL_TILE": self.tile, "PL_CHUNK": self.chunk, "PL_LOCAL": self.local_size}
+            defines = {**points_cl_defines(), "PL_SS": ss, "PL_TILE": self.tile, "PL_CHUNK": self.chunk,
+                       "PL_LOCAL": self.local_size}
             if self.record:
                 defines["PL_RECORD"] = 1
             files = ["common/keys.cl", "points/points.cl", "points/subsamples.cl", "points/points_lfb.cl"]

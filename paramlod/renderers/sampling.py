@@ -33,6 +33,7 @@ COVERAGE = ("centre", "pixel", "quad")   # PointSettings.coverage
 # one line around, of at most THIN_LOOP_2 (a tube under a pixel across) with two
 THIN_LOOP_1, THIN_LOOP_2 = np.float32(2), np.float32(3)
 THIN_ALONG = np.float32(1.2)   # samples per target pixel along them (points.cl: the measure's chords)
+POINTS_LOCAL = 64   # work-group size of points_direct (points.cl reqd_work_group_size)
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
 MEASURE_SEGMENT, MEASURE_EXTENT, MEASURE_BOUNDARY = 0, 1, 2
@@ -241,6 +242,16 @@ def patch_debug_materials(render_list: np.ndarray, materials: np.ndarray, color_
 # --- pixel-centre coverage (PointSettings.coverage "centre") ------------------------------------
 COVER_REACH = 2         # pixels from the sample's own that a cell may reach
 COVER_OWN = 0x80000000  # the cell is degenerate: the sample covers its own pixel
+
+
+def points_cl_defines() -> dict:
+    """The constants kernels/points/points.cl is built with: this module's, so that the kernels
+    and their numpy twins here read one source."""
+    def cl_float(x):
+        return np.format_float_positional(np.float32(x), trim="0") + "f"
+    return {"THIN_LOOP_1": cl_float(THIN_LOOP_1), "THIN_LOOP_2": cl_float(THIN_LOOP_2),
+            "THIN_ALONG": cl_float(THIN_ALONG), "COVER_REACH": COVER_REACH,
+            "COVER_OWN": f"{COVER_OWN:#x}u", "POINTS_LOCAL": POINTS_LOCAL}
 
 
 def _ceil_small(t):
