@@ -150,6 +150,9 @@ class LodStage:
     measured in every view, culled only if no view sees it, and otherwise split if it is too large
     in any view that sees it (its measures are the maxima over those views, its screen box their
     union; kernels/lod/lod.cl). One render list serves all the views."""
+    # work-groups of LOD_LOCAL per compute unit and step (they stride over the patches); None: the
+    # device kind's (below)
+    groups_per_unit = None
 
     def __init__(self, functions):
         self._functions = functions
@@ -184,8 +187,8 @@ class LodStage:
         self._depth: dict[tuple, int] = {}
         self._depth_key = None
         self.events = []   # the last enqueued stage's kernel events (device timing)
-        # work-groups of LOD_LOCAL per step (they stride over the patches): enough to fill the device
-        self.max_groups = dev.device.max_compute_units * (64 if dev.is_gpu else 16)
+        # work-groups of LOD_LOCAL per step: enough to fill the device
+        self.max_groups = dev.device.max_compute_units * (self.groups_per_unit or (64 if dev.is_gpu else 16))
 
     def run(self, inst, domains, cam_buf, settings: LodSettings, t_div: float = 1.0, n_views: int = 1,
             tiers=None, one_sided: bool = True):
