@@ -49,7 +49,12 @@
 // culls); record 0
 // holds the initial patch count and, at LOD_RENDER_TOTAL, the render list's length. These, the
 // patch structs and LOD_LOCAL come from the prelude (paramlod.core.layouts); LOD_GROUP, LOD_SLOTS
-// (the work-group's layout, lod_step) and LOD_MAX_VIEWS from the host (paramlod/lod/stage.py).
+// (the work-group's layout, lod_step) and LOD_MAX_VIEWS from the host (paramlod/lod/stage.py), as
+// are the measure's constants BOUNDARY_CAP, MIXED_MIN_PX, CURVE_MIN_PX, CURVE_MAX_PX, BOUNDARY_SHARE,
+// CONE_LIPSCHITZ, CONE_EPS, SIL_GRAZE and SPOT_SUBS (lod_cl_defines, which the numpy twin reads).
+#ifndef BOUNDARY_CAP
+#error "build lod.cl with paramlod.lod.stage.lod_cl_defines()"
+#endif
 
 typedef struct {
     float2 s;      // screen position in pixels
@@ -104,10 +109,8 @@ inline void grow_box(float4* box, Sample s) {
 
 // How far beyond the measured lines a boundary's need may raise a patch's sample measure (the
 // raise only corrects the extrapolation to the edge; a boundary needing more means the patch
-// should have split, and the cap keeps one bad sample from costing a whole grid).
-#define BOUNDARY_CAP 2.0f
-// A line with bad and good samples splits while its good segments are longer than this (pixels).
-#define MIXED_MIN_PX 1.0f
+// should have split, and the cap keeps one bad sample from costing a whole grid): BOUNDARY_CAP.
+// A line with bad and good samples splits while its good segments are longer than MIXED_MIN_PX.
 // Detail between the samples (twin: reference.line_turns): a measured line whose consecutive
 // world-space segments turn by more than LodSettings.detail_angle (curve_cos: its cosine) does not
 // resolve the surface along it (a thin SH lobe, a shell's nodule: the segments cut across it, and
@@ -120,8 +123,6 @@ inline void grow_box(float4* box, Sample s) {
 // an order-12 HARDI field seen close up split 10x with the bounds at 7 px and none). A sphere's or
 // torus' whole circle turns 51.4 degrees a segment and never splits for it; at 120 degrees the
 // yarn curtain's loops do not split either, at 90 they split 3x at 1080p.
-#define CURVE_MIN_PX 14.0f
-#define CURVE_MAX_PX 28.0f
 inline bool line_turns(__local const float4* w, uint first, float curve_cos) {
     bool turns = false;
     float3 a = w[first + 1u].xyz - w[first].xyz;
@@ -133,12 +134,11 @@ inline bool line_turns(__local const float4* w, uint first, float curve_cos) {
     }
     return turns;
 }
-// The share of a boundary's need the raise asks for. The point renderer's default density (1.5
+// BOUNDARY_SHARE: the share of a boundary's need the raise asks for. The point renderer's default density (1.5
 // samples per measured pixel, steps of 0.67 px) leaves a margin below the hole-free step of
 // 1/sqrt(2) px; the boundary, measured at its end rather than estimated from segment averages,
 // is held to that step exactly (sqrt(2) / 1.5), so the common small excess at an edge (a few %,
 // nearly every patch of a sphere) costs no samples and only a real shortfall raises the grid.
-#define BOUNDARY_SHARE 0.9428090f
 
 // A line's speed at its end extrapolated linearly from its two segments nearest the end (a, then
 // b; their midpoints lie half and one and a half segments from the end): exact for a speed that
@@ -172,10 +172,8 @@ inline void emit(__global EvalPatch* out, uint slot, uint cap, float u0, float u
 // culled (a one-sided material, or a closed surface whose df/du x df/dv points outwards).
 // The partials are assumed to vary over the patch no faster than CONE_LIPSCHITZ x the largest
 // difference between neighbouring nodes of the 5x5 grid shows (the one assumption of the bound).
-#define CONE_LIPSCHITZ 2.0f
-// Float32 rounding of the partials, the cross products and the trigonometry (not proven: a
-// generous allowance, far above what float32 loses on a regular patch).
-#define CONE_EPS 1e-3f
+// CONE_EPS: float32 rounding of the partials, the cross products and the trigonometry (not proven:
+// a generous allowance, far above what float32 loses on a regular patch).
 #define CONE_NODES 25
 
 // Node k of the 5x5 grid over the patch widened by `widen` of its size per side and clamped to

@@ -11,7 +11,7 @@
 #define SPOT_NU 8            // corners along u (7 cells)
 #define SPOT_NV 4            // corners along v (3 cells)
 #define SPOT_CORNERS 32
-#define SPOT_SUBS 189        // 21 cells x 9 offsets
+// SPOT_SUBS (from the host): 21 cells x 9 offsets
 
 // the sub-sample offsets within a cell, as a share of its side
 inline float spot_offset(uint k) {
@@ -69,8 +69,7 @@ inline bool spot_turns(uint func, __global const float* P, __global const float*
 // or 4xSS for points). The normals are finite differences of the LOD step's 5 x 5 grid of world
 // positions g[25] (w != 0: a bad sample), central inside the grid, one-sided on its edges; the
 // facing is the cosine to the view at `cam` (view_dir: towards the eye, or the view axis when
-// orthographic).
-#define SIL_GRAZE 0.17f   // cos 80 degrees
+// orthographic). SIL_GRAZE (from the host): cos 80 degrees.
 inline bool grid_silhouette(__local const float4* g, __global const float* cam) {
     bool front = false, back = false, grazing = false;
     for (uint k = 0; k < 25u; ++k) {

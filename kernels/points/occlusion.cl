@@ -13,10 +13,11 @@
 //   phase 2 (occlusion_second): after the first draw, test the deferred patches against a pyramid
 //     of this frame's keys (exact: keys only get nearer) and draw the ones that pass.
 
-#define OCC_GRID 5     // positions per side of a patch's bound (paramlod/renderers/occlusion.py GRID)
-#define OCC_FLOATS 8   // floats per bound: x0, y0, x1, y1 (pixels), near depth, 3 unused
-#ifndef OCC_SPAN      // texels per side of the box's level at most (paramlod/renderers/occlusion.py
-#define OCC_SPAN 8u   // occlusion_span: 8 on CPUs, 2 on GPUs)
+// From the host (paramlod/renderers/occlusion.py occlusion_cl_defines): OCC_GRID positions per side
+// of a patch's bound; OCC_FLOATS floats per bound (x0, y0, x1, y1 in pixels, near depth, 3 unused);
+// OCC_SPAN texels per side of the box's level at most (8 on CPUs, 2 on GPUs).
+#ifndef OCC_GRID
+#error "build occlusion.cl with paramlod.renderers.occlusion.occlusion_cl_defines()"
 #endif
 
 // Level l of a W x H key image: ceil(W / 2^(l+1)) x ceil(H / 2^(l+1)) texels, levels one after another.

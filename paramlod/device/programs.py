@@ -48,6 +48,14 @@ def context_lines(src: str, log: str, pattern: str = CL_LINE, around: int = 3) -
     return "\n...\n".join(shown)
 
 
+def define_options(defines: dict) -> tuple[str, ...]:
+    """``-D`` compiler options for ``defines``: a numpy float32 value becomes a float literal
+    (``2.0f``, the same float: the constant a numpy twin reads), anything else its text."""
+    def text(v):
+        return np.format_float_positional(v, trim="0") + "f" if isinstance(v, np.float32) else v
+    return tuple(f"-D{k}={text(v)}" for k, v in sorted(defines.items()))
+
+
 def build(files: list[str], defines: dict | None = None, options: tuple = (), generated: str = "",
           describe: str = "none"):
     """Compile the prelude (``paramlod.core.layouts.cl_prelude``: records, shading constants, sRGB
@@ -64,7 +72,7 @@ def build(files: list[str], defines: dict | None = None, options: tuple = (), ge
                       *(kernels.source(f) for f in files)])
     dev = cl_device()
     defines = {**(defines or {}), "PL_GPU": int(dev.is_gpu)}
-    opts = tuple(f"-D{k}={v}" for k, v in sorted(defines.items())) + tuple(options)
+    opts = define_options(defines) + tuple(options)
     cache = dev.cache.setdefault("programs", {})
     key = (src, opts)
     prog = cache.get(key)

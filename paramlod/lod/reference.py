@@ -17,7 +17,8 @@ import numpy as np
 
 from paramlod.core.layouts import CAMERA
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE, FLAG_FORCED, TIER_SHIFT, initial_patches
-from paramlod.lod.stage import check_budget, tier_values
+from paramlod.lod.stage import (BOUNDARY_CAP, BOUNDARY_SHARE, CONE_EPS, CONE_LIPSCHITZ, CURVE_MAX_PX, CURVE_MIN_PX,
+                                 MIXED_MIN_PX, SIL_GRAZE, check_budget, tier_values)
 from paramlod.lod.uploads import ONE_SIDED, instance_flags, wrap_flags
 
 F = np.float32
@@ -74,13 +75,6 @@ def _seg(s, state):
     d = np.linalg.norm(s[..., 1:, :] - s[..., :-1, :], axis=-1).astype(np.float32)
     d = np.where((a == 1) | (b == 1), np.float32(np.inf), d)
     return np.where((a == 2) | (b == 2), np.float32(0), d)
-
-
-BOUNDARY_CAP = F(2.0)   # kernels/lod/lod.cl BOUNDARY_CAP
-MIXED_MIN_PX = F(1.0)   # kernels/lod/lod.cl MIXED_MIN_PX
-CURVE_MIN_PX = F(14.0)  # kernels/lod/lod.cl CURVE_MIN_PX
-CURVE_MAX_PX = F(28.0)  # kernels/lod/lod.cl CURVE_MAX_PX
-BOUNDARY_SHARE = F(0.9428090)   # kernels/lod/lod.cl BOUNDARY_SHARE: sqrt(2) / 1.5
 
 
 def edge_extrapolate(a, b):
@@ -346,8 +340,6 @@ def run_lod(scene, camera_records, settings, functions=None, tiers=None):
 
 
 # --- back-face culling (kernels/lod/lod.cl normal_cone, cone_back; docs/lod.md) ---------------
-CONE_LIPSCHITZ = F(2.0)   # lod.cl CONE_LIPSCHITZ
-CONE_EPS = F(1e-3)        # lod.cl CONE_EPS
 HALF_PI = F(np.pi / 2)
 
 
@@ -496,9 +488,6 @@ def spot_counts(patches, scene_inst, functions, most_u, most_v, scale, spot_cos)
     ok = np.logical_and.reduce(np.broadcast_arrays(*known))
     turns = ok & ((ns * blend).sum(-1, dtype=F) < F(spot_cos) * _norm(blend))
     return turns.reshape(n, -1).sum(axis=1)
-
-
-SIL_GRAZE = F(0.17)   # spot.cl SIL_GRAZE
 
 
 def grid_silhouettes(patches, scene_inst, functions, cams, seen) -> np.ndarray:

@@ -119,6 +119,23 @@ C_CHILDREN, C_SPLIT, C_CULLED, C_RENDERED, C_FORCED, C_BACKFACE, C_PROMOTED, C_T
     LOD_COUNTER.offset(f) for f in ("children", "split", "culled", "rendered", "forced", "backface", "promoted",
                                     "tier1", "tier2"))
 SPOT_SUBS = 189   # kernels/lod/spot.cl: 7 x 3 cells, 9 sub-samples each
+# The measure's constants: kernels/lod/lod.cl and spot.cl are built with them (lod_cl_defines) and
+# the numpy twin (paramlod/lod/reference.py) reads them; the kernels say what each is for.
+BOUNDARY_CAP = np.float32(2.0)
+MIXED_MIN_PX = np.float32(1.0)
+CURVE_MIN_PX, CURVE_MAX_PX = np.float32(14.0), np.float32(28.0)
+BOUNDARY_SHARE = np.float32(0.9428090)   # sqrt(2) / 1.5
+CONE_LIPSCHITZ, CONE_EPS = np.float32(2.0), np.float32(1e-3)
+SIL_GRAZE = np.float32(0.17)   # cos 80 degrees
+
+
+def lod_cl_defines() -> dict:
+    """The constants above, as kernels/lod/lod.cl is built with them."""
+    return {"BOUNDARY_CAP": BOUNDARY_CAP, "MIXED_MIN_PX": MIXED_MIN_PX, "CURVE_MIN_PX": CURVE_MIN_PX,
+            "CURVE_MAX_PX": CURVE_MAX_PX, "BOUNDARY_SHARE": BOUNDARY_SHARE, "CONE_LIPSCHITZ": CONE_LIPSCHITZ,
+            "CONE_EPS": CONE_EPS, "SIL_GRAZE": SIL_GRAZE, "SPOT_SUBS": SPOT_SUBS}
+
+
 LOD_RENDER_TOTAL = LOD_COUNTER.constant("LOD_RENDER_TOTAL")   # counters[0, 1]: the render list's length
 LOD_LOCAL = constant("LOD_LOCAL")   # work-items measuring one patch together (kernels/lod/lod.cl)
 # views one work-group projects at once (local memory: 89 x 9 bytes a view)
@@ -288,7 +305,7 @@ class LodStage:
         key = (layout, backface, tiers)
         if key not in self._step_kernels:
             group, slots = layout
-            defines = {"LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots,
+            defines = {**lod_cl_defines(), "LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots,
                        "LOD_BACK_TEST": int(backface), "LOD_TIER_CHECKS": int(tiers)}
             if not cl_device().is_gpu:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
                 defines[POLY_TRIG] = 1

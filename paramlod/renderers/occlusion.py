@@ -17,8 +17,8 @@ from paramlod.core.layouts import RENDER_PATCH
 from paramlod.device.context import cl_device
 from paramlod.device.programs import launch
 
-GRID = 5        # positions per side of a patch's bound (occlusion.cl OCC_GRID)
-BOUND_FLOATS = 8
+GRID = 5        # positions per side of a patch's bound
+BOUND_FLOATS = 8   # floats per bound: x0, y0, x1, y1 (pixels), near depth, 3 unused
 COUNTS = ("early", "deferred", "late")   # occlusion.cl counts[0..2]
 LOCAL = 64
 
@@ -29,6 +29,11 @@ def occlusion_span(gpu: bool) -> int:
     finer test made `occlusion = "auto"` cull the seashells' frames of about 1 ms, whose culling
     costs more than the samples it spares (an H100: 0.77-0.95x the frame rate)."""
     return 2 if gpu else 8
+
+
+def occlusion_cl_defines(gpu: bool) -> dict:
+    """The constants kernels/points/occlusion.cl is built with (its twin reads them here)."""
+    return {"OCC_GRID": GRID, "OCC_FLOATS": BOUND_FLOATS, "OCC_SPAN": occlusion_span(gpu)}
 
 
 def pyramid_levels(width: int, height: int) -> list[tuple[int, int]]:

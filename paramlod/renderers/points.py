@@ -13,7 +13,7 @@ from paramlod.errors import CapacityError
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import POINT_TIERS, tier_divisors
-from paramlod.renderers.occlusion import OcclusionCuller, occlusion_span
+from paramlod.renderers.occlusion import OcclusionCuller, occlusion_cl_defines
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.sampling import (COLOR_BY, POINTS_LOCAL, PointSettings, grid_counts, patch_wraps,  # noqa: F401  (re-exported)
                                          points_cl_defines, side_counts)
@@ -106,7 +106,7 @@ class DirectPointRenderer:
         if gpu if self.group_schedule is None else self.group_schedule:
             defines["PL_GROUP_SCHEDULE"] = 1
         defines["PL_RUN"] = sample_run(gpu)   # points.cl patch_runs
-        defines["OCC_SPAN"] = occlusion_span(gpu)   # occlusion.cl occluded
+        defines.update(occlusion_cl_defines(gpu))
         self._functions, self._defines = functions, defines
         self._auto_pack = self.pack is None and cl_device().is_gpu
         self.packed = not cl_device().is_gpu if self.pack is None else bool(self.pack)

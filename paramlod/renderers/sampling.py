@@ -245,13 +245,10 @@ COVER_OWN = 0x80000000  # the cell is degenerate: the sample covers its own pixe
 
 
 def points_cl_defines() -> dict:
-    """The constants kernels/points/points.cl is built with: this module's, so that the kernels
-    and their numpy twins here read one source."""
-    def cl_float(x):
-        return np.format_float_positional(np.float32(x), trim="0") + "f"
-    return {"THIN_LOOP_1": cl_float(THIN_LOOP_1), "THIN_LOOP_2": cl_float(THIN_LOOP_2),
-            "THIN_ALONG": cl_float(THIN_ALONG), "COVER_REACH": COVER_REACH,
-            "COVER_OWN": f"{COVER_OWN:#x}u", "POINTS_LOCAL": POINTS_LOCAL}
+    """The constants kernels/points/points.cl is built with (paramlod.device.programs.build): this
+    module's, so that the kernels and their numpy twins here read one source."""
+    return {"THIN_LOOP_1": THIN_LOOP_1, "THIN_LOOP_2": THIN_LOOP_2, "THIN_ALONG": THIN_ALONG,
+            "COVER_REACH": COVER_REACH, "COVER_OWN": f"{COVER_OWN:#x}u", "POINTS_LOCAL": POINTS_LOCAL}
 
 
 def _ceil_small(t):

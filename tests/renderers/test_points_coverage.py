@@ -14,6 +14,7 @@ from helpers.silhouettes import glyph_case, iou_of, settings_for
 from paramlod import kernels
 from paramlod.core.layouts import cl_prelude
 from paramlod.device.context import cl_device
+from paramlod.device.programs import define_options
 from paramlod.function.codegen_cl import cl_dispatch_source
 from paramlod.function.registry import get_function
 from paramlod.renderers.sampling import COVER_OWN, COVER_REACH, cover_cells, points_cl_defines
@@ -35,7 +36,7 @@ def _device_cover(rows, size):
     dev = cl_device()
     src = "\n".join([cl_prelude(), kernels.source("common/common.cl"), cl_dispatch_source([get_function("sphere")]),
                      kernels.source("common/keys.cl"), kernels.source("points/points.cl"), PROBE])
-    prog = cl.Program(dev.context, src).build(options=[f"-D{k}={v}" for k, v in points_cl_defines().items()])
+    prog = cl.Program(dev.context, src).build(options=list(define_options(points_cl_defines())))
     mf = cl.mem_flags
     inp = cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(rows, np.float32))
     out = np.zeros(len(rows), np.uint32)

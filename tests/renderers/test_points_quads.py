@@ -14,6 +14,7 @@ from paramlod import kernels
 from paramlod.core.layouts import camera_record, cl_prelude
 from paramlod.core.shading import LIGHT
 from paramlod.device.context import cl_device
+from paramlod.device.programs import define_options
 from paramlod.function.codegen_cl import cl_dispatch_source
 from paramlod.function.registry import get_function
 from paramlod.renderers.sampling import cover_triangle, points_cl_defines
@@ -39,7 +40,7 @@ def _device_cover(tris):
     dev = cl_device()
     src = "\n".join([cl_prelude(), kernels.source("common/common.cl"), cl_dispatch_source([get_function("sphere")]),
                      kernels.source("common/keys.cl"), kernels.source("points/points.cl"), PROBE])
-    prog = cl.Program(dev.context, src).build(options=[f"-D{k}={v}" for k, v in points_cl_defines().items()])
+    prog = cl.Program(dev.context, src).build(options=list(define_options(points_cl_defines())))
     mf = cl.mem_flags
     cam = pl.Camera.look_at((0, 0, 3), (0, 0, 0), size=SIZE)
     bufs = [cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a, np.float32))
