@@ -108,8 +108,8 @@ class DirectPointRenderer:
         defines["PL_RUN"] = sample_run(gpu)   # points.cl patch_runs
         defines.update(occlusion_cl_defines(gpu))
         self._functions, self._defines = functions, defines
-        self._auto_pack = self.pack is None and cl_device().is_gpu
-        self.packed = not cl_device().is_gpu if self.pack is None else bool(self.pack)
+        self._auto_pack = self.pack is None and gpu
+        self.packed = not gpu if self.pack is None else bool(self.pack)
         self._program_packed = self.packed
         # the program of one-view frames with pixel coverage, which occlusion.cl shares (the
         # function code is compiled once; OcclusionCuller takes its kernels whatever the frame's

@@ -216,10 +216,11 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         cam = _orbit(base, centre, dist, k, args.frames, size)
         start_timing()
         stats = render_on_device(scene, cam, variant, rs)
-        kernels = stop_timing()
+        by_kernel = stop_timing()
         if k >= args.warmup:
-            rows.append((stats, sum(kernels.values()), kernels))
+            rows.append((stats, by_kernel))
     st = [r[0] for r in rows]
+    kernels = [r[1] for r in rows]
     # the frame's image read back, then the rest of its arrays
     extra = render(scene, cam, variant, rs)
     t0 = time.perf_counter()
@@ -234,11 +235,11 @@ def measure(scene, base, centre, dist, variant, aa, args, threshold, l_max, l_mi
         "frame_ms": med(frame), "frame_ms_p95": float(np.percentile(frame, 95)),
         "lod_ms": med(s["ms"].get("lod", 0.0) for s in st),
         "render_ms": med(s["ms"]["render"] for s in st),
-        "cl_kernel_ms": med(r[1] for r in rows),
+        "cl_kernel_ms": med(sum(k.values()) for k in kernels),
         # each OpenCL kernel's device ms a frame (summed over its launches), largest first: where
         # the frame's device time goes
-        "kernel_ms": dict(sorted(((name, med(r[2].get(name, 0.0) for r in rows))
-                                  for name in {n for r in rows for n in r[2]}), key=lambda kv: -kv[1])),
+        "kernel_ms": dict(sorted(((name, med(k.get(name, 0.0) for k in kernels))
+                                  for name in {n for k in kernels for n in k}), key=lambda kv: -kv[1])),
         "render_patches": med(s.get("render_patches", 0) for s in st),
         "lod_steps_in": [med(s["lod_steps"][i]["in"] for s in st) for i in range(len(st[0].get("lod_steps", [])))],
         "samples": med(s.get("samples", 0) for s in st),
