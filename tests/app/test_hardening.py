@@ -281,6 +281,18 @@ def test_bench_checks_its_folder_before_measuring(work, capsys, monkeypatch):
     assert rc == 2 and "--out" in err
 
 
+def test_bench_extras_without_their_modules(work, capsys, monkeypatch):
+    """An extra asked for by name whose optional module is missing stops the bench before anything
+    is measured, naming the module; the default extras leave it out with a note."""
+    real = bench.importlib.util.find_spec
+    monkeypatch.setattr(bench.importlib.util, "find_spec", lambda m, *a: None if m == "pymeshfix" else real(m, *a))
+    monkeypatch.setattr(bench, "cl_device", lambda: pytest.fail("measured before checking --extras"))
+    rc, _, err = run_cli(["bench", "--out", "b", "--only-extras", "--extras", "functions", "meshes"], capsys)
+    assert rc == 2 and "--extras meshes needs pymeshfix" in err and not (work / "b").exists()
+    assert bench._usable_extras(None) == ["ceilings", "functions", "surfels"]
+    assert "leaving out the meshes extra: it needs pymeshfix" in capsys.readouterr().out
+
+
 def test_all_outputs_or_none(work):
     def fail(path):
         raise pl.ParamlodError(f"cannot write {path}")

@@ -20,6 +20,7 @@ Results go to DIR/results.json (written after every measurement), DIR/results.md
 from __future__ import annotations
 
 import importlib.resources
+import importlib.util
 import json
 import os
 import platform
@@ -81,10 +82,11 @@ def add_arguments(p):
                    help="camera distances as multiples of the framing distance (default 0.35 0.6 1 2)")
     p.add_argument("--frames", type=positive_int, default=8, help="timed frames per orbit (default 8)")
     p.add_argument("--warmup", type=non_negative_int, default=2, help="untimed frames before each orbit (default 2)")
-    p.add_argument("--extras", nargs="*", default=["ceilings", "functions", "surfels", "meshes"],
+    p.add_argument("--extras", nargs="*", default=None,
                    choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval", "skinned", "viewer", "multiview",
                             "hybrid"],
-                   help="extra measurements (default all but mesh-eval, the full / chain / DAG evaluation, "
+                   help="extra measurements (default ceilings, functions, surfels and meshes, leaving out those whose "
+                        "optional modules are missing; not by default: mesh-eval, the full / chain / DAG evaluation, "
                         "skinned, the rigged giant worm with its conservative culling, viewer, the "
                         "interactive viewer's presenting overhead, multiview, N views in one frame, and hybrid, "
                         "hybrid anti-aliasing against uniform 4xSS+8xMS / 16xSS from far to near, with FLIP)")
@@ -303,6 +305,32 @@ def surfel_costs(size) -> dict:
 
 
 # --- driver -----------------------------------------------------------------------------------------
+DEFAULT_EXTRAS = ("ceilings", "functions", "surfels", "meshes")
+_BENCH_EXTRA = "pip install 'paramlod[bench]'"
+# the optional modules an extra imports, and where each comes from
+EXTRA_NEEDS = {
+    "meshes": {"pymeshfix": "it ships the Stanford bunny scan that is measured (pip install pymeshfix)"},
+    "mesh-eval": {"pymeshfix": "it ships the Stanford bunny scan that is measured (pip install pymeshfix)",
+                  "flip_evaluator": _BENCH_EXTRA, "skimage": _BENCH_EXTRA},
+    "hybrid": {"flip_evaluator": _BENCH_EXTRA},
+}
+
+
+def _usable_extras(asked) -> list:
+    """The extras to measure. Extras asked for by name whose modules are missing stop the bench
+    before anything is measured; of the default ones, those are left out with a note."""
+    missing = {e: [m for m in EXTRA_NEEDS.get(e, {}) if importlib.util.find_spec(m) is None]
+               for e in (DEFAULT_EXTRAS if asked is None else asked)}
+    missing = {e: ms for e, ms in missing.items() if ms}
+    if asked is not None and missing:
+        raise ParamlodError("; ".join(f"--extras {e} needs {m}: {EXTRA_NEEDS[e][m]}" for e, ms in missing.items()
+                                      for m in ms))
+    for e, ms in missing.items():
+        print(f"paramlod bench: leaving out the {e} extra: it needs {', '.join(ms)} "
+              f"({'; '.join(EXTRA_NEEDS[e][m] for m in ms)})", flush=True)
+    return [e for e in (DEFAULT_EXTRAS if asked is None else asked) if e not in missing]
+
+
 def run_bench(args) -> int:
     size = args.size
     names = [] if args.only_extras else args.scenarios or DEFAULT
@@ -311,6 +339,7 @@ def run_bench(args) -> int:
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
         raise ParamlodError(f"unknown scenario(s) {', '.join(unknown)} (available: {', '.join(SCENARIOS)})")
+    args.extras = _usable_extras(args.extras)
     # the results folder is checked (made, and a file created in it) before anything is measured
     out = check_folder(Path(args.out), "--out", create=True)
     if args.peers:
