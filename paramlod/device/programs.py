@@ -10,6 +10,7 @@ first frame waits."""
 from __future__ import annotations
 
 import re
+import warnings
 
 import numpy as np
 import pyopencl as cl
@@ -48,6 +49,20 @@ def context_lines(src: str, log: str, pattern: str = CL_LINE, around: int = 3) -
     return "\n...\n".join(shown)
 
 
+# NVIDIA's compiler says of every kernel that it ignores a noinline attribute (a kernel may be
+# inlined): nothing anyone can act on, so it is not shown
+_NVIDIA_KERNEL_NOTE = re.compile(r"\(\):\s*Warning: Function \w+ is a kernel, so overriding noinline attribute\."
+                                 r"\s*The function may be inlined when called\.")
+# the kernels pyopencl generates for itself (scans, array fills) pass the same notes on as
+# warnings; they are about pyopencl's code, not a user's
+warnings.filterwarnings("ignore", category=cl.CompilerWarning, module=r"pyopencl(\.|$)")
+
+
+def compiler_notes(log: str) -> str:
+    """What a successful build's ``log`` says that is worth showing ('' if nothing)."""
+    return _NVIDIA_KERNEL_NOTE.sub("", log).strip()
+
+
 def define_options(defines: dict) -> tuple[str, ...]:
     """``-D`` compiler options for ``defines``: a numpy float32 value becomes a float literal
     (``2.0f``, the same float: the constant a numpy twin reads), anything else its text."""
@@ -80,7 +95,13 @@ def build(files: list[str], defines: dict | None = None, options: tuple = (), ge
         what = ", ".join(files) or "generated code"
         _compiling.append(what)
         try:
-            prog = cl.Program(dev.context, src).build(options=list(opts))
+            with warnings.catch_warnings():   # pyopencl's note says only "non-empty output"; ours says what
+                warnings.simplefilter("ignore", cl.CompilerWarning)
+                prog = cl.Program(dev.context, src).build(options=list(opts))
+            notes = compiler_notes(prog.get_build_info(dev.device, cl.program_build_info.LOG) or "")
+            if notes:
+                warnings.warn(f"the OpenCL compiler's notes on {what}: {notes[-2000:]}", cl.CompilerWarning,
+                              stacklevel=2)
         except cl.RuntimeError as exc:
             log = str(exc)
             raise FunctionError(
