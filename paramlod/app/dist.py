@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import glob
+import importlib.util
 import json
 import logging
 import math
@@ -370,11 +371,9 @@ class _Cluster:
         return f"{len(self.envs)} local {'GPU ' if w.gpus else ''}worker(s)"
 
     def __enter__(self):
-        try:
-            import dask
-            from distributed import Client, Nanny, Scheduler, SpecCluster
-        except ImportError:
-            raise ParamlodError("--workers, --gpus and --scheduler need Dask: pip install 'dask[distributed]'") from None
+        need_dask("--workers, --gpus and --scheduler")
+        import dask
+        from distributed import Client, Nanny, Scheduler, SpecCluster
         w = self.where
         # a worker that died while running a task counts as one failure of that task
         dask.config.set({"distributed.scheduler.allowed-failures": max(0, w.retries)})
@@ -438,6 +437,12 @@ def _prepare_outputs(todo: list[Task]):
         _clear_leftovers(t)
 
 
+def need_dask(what: str) -> None:
+    """A ParamlodError saying that ``what`` needs Dask, when its distributed scheduler is not installed."""
+    if importlib.util.find_spec("distributed") is None:
+        raise ParamlodError(f"{what} need Dask's distributed scheduler: pip install 'paramlod[dist]'")
+
+
 def run_job(job: Job, where: Where | None = None, progress: bool = True, overwrite: bool = False) -> JobReport:
     """Run every task of ``job`` whose outputs are not already there and valid; the report of what
     ran where. A task's bad input raises its ParamlodError (naming the task) after the other tasks
@@ -448,6 +453,8 @@ def run_job(job: Job, where: Where | None = None, progress: bool = True, overwri
     done_before = [not overwrite and _is_done(t) for t in job.tasks]
     todo = [t for t, d in zip(job.tasks, done_before) if not d]
     skipped = [t.name for t, d in zip(job.tasks, done_before) if d]
+    if todo and not where.serial:
+        need_dask("--workers, --gpus and --scheduler")
     _prepare_outputs(todo)
     bar = tqdm(total=len(job.tasks), initial=len(job.tasks) - len(todo), unit=job.unit, disable=not progress,
                file=sys.stderr, dynamic_ncols=True)
@@ -1053,6 +1060,7 @@ def bench_scaling(scene="gallery/giant_worm.toml", frames: int = 24, size=(320, 
     first frame (program builds) are not timed."""
     import tempfile
 
+    need_dask("bench-scale's clusters")
     from distributed import wait
 
     scene = str(Path(scene).resolve())
@@ -1128,6 +1136,8 @@ def run_bench_scaling(args) -> int:
         counts = tuple(_local_workers(x) for x in str(args.workers).split(","))
     except argparse.ArgumentTypeError as exc:
         raise ParamlodError(f"bench-scale: {exc}") from None
+    if args.json:   # checked before the runs, which take minutes
+        check_folder(Path(args.json).parent, "--json")
     res = bench_scaling(args.scene, args.frames, size, counts, args.threads, args.gpus, progress=True)
     print(format_bench(res))
     if args.json:

@@ -293,6 +293,21 @@ def test_bench_extras_without_their_modules(work, capsys, monkeypatch):
     assert "leaving out the meshes extra: it needs pymeshfix" in capsys.readouterr().out
 
 
+def test_cluster_work_without_dask_says_so_before_any_frame(work, capsys, monkeypatch):
+    """Without Dask, --workers and bench-scale fail with one line naming the extra to install,
+    before a frame is drawn or a progress bar drawn (bench-scale said it with a traceback)."""
+    from paramlod.app import dist
+
+    real = dist.importlib.util.find_spec
+    monkeypatch.setattr(dist.importlib.util, "find_spec", lambda m, *a: None if m == "distributed" else real(m, *a))
+    monkeypatch.setattr(dist, "render_frame", lambda *a, **k: pytest.fail("rendered before checking for Dask"))
+    rc, _, err = run_cli(["render", S, "--frames", "0:2", "-o", "f{frame}.png", "--workers", "2"], capsys)
+    assert rc == 2 and "need Dask" in err and "paramlod[dist]" in err and "frame/s" not in err, err
+    assert not list(work.glob("f*.png"))
+    rc, _, err = run_cli(["bench-scale", "--scene", S, "--frames", "1"], capsys)
+    assert rc == 2 and "need Dask" in err and "Traceback" not in err, err
+
+
 def test_all_outputs_or_none(work):
     def fail(path):
         raise pl.ParamlodError(f"cannot write {path}")
