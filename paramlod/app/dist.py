@@ -53,6 +53,7 @@ DEFAULT_FPS = 24.0
 DEFAULT_RETRIES = 2
 IMAGE_SUFFIXES = (".png", ".exr")
 VIDEO_SUFFIXES = (".gif", ".mp4")
+_NO_FFMPEG = "--video {}: MP4 needs imageio-ffmpeg: pip install imageio-ffmpeg (or write a .gif)"
 # every task of a job and its output names are made (about 1 KB each) before the first task runs
 MAX_JOB_TASKS = 100_000
 WORKERS_PER_CORE = 4   # --workers: more local processes than this only add start-up time and memory
@@ -909,6 +910,8 @@ def render_job(scenes, outputs=None, frames=None, fps: float | None = None, turn
     if video is not None:
         if Path(video).suffix.lower() not in VIDEO_SUFFIXES:
             raise ParamlodError(f"--video {video}: must end with .gif or .mp4")
+        if Path(video).suffix.lower() == ".mp4" and importlib.util.find_spec("imageio_ffmpeg") is None:
+            raise ParamlodError(_NO_FFMPEG.format(video))   # before the frames, not after them
         if len(scenes) > 1 and "{scene" not in video:
             raise ParamlodError(f"--video {video}: {len(scenes)} scenes need one video each: put {{scene}} in "
                                 "the name, e.g. out/{scene}.gif")
@@ -987,8 +990,7 @@ def write_video(path, frames, fps: float) -> Path:
     try:
         import imageio_ffmpeg
     except ImportError:
-        raise ParamlodError(f"--video {path}: MP4 needs imageio-ffmpeg: pip install imageio-ffmpeg "
-                            "(or write a .gif)") from None
+        raise ParamlodError(_NO_FFMPEG.format(path)) from None
     h, w = imgs[0].shape[:2]
     # H.264 in yuv420p needs even sides: pad by repeating the last row/column
     padded = np.stack([np.pad(a, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge") for a in imgs])

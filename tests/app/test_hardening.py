@@ -308,6 +308,26 @@ def test_cluster_work_without_dask_says_so_before_any_frame(work, capsys, monkey
     assert rc == 2 and "need Dask" in err and "Traceback" not in err, err
 
 
+def test_missing_writers_and_meshes_are_named_before_the_work(work, capsys, monkeypatch):
+    """An MP4 without imageio-ffmpeg and the peers' bunny without pymeshfix stop the command before
+    the frames or renders it would otherwise finish first."""
+    from paramlod.app import dist
+    from paramlod.app.bench import peers
+
+    real = dist.importlib.util.find_spec
+    monkeypatch.setattr(dist.importlib.util, "find_spec", lambda m, *a: None if m == "imageio_ffmpeg" else real(m, *a))
+    monkeypatch.setattr(dist, "render_frame", lambda *a, **k: pytest.fail("rendered before checking the video"))
+    rc, _, err = run_cli(["render", S, "--frames", "0:2", "-o", "f{frame}.png", "--video", "v.mp4"], capsys)
+    assert rc == 2 and "imageio-ffmpeg" in err and not list(work.glob("f*.png")), err
+
+    def no_pymeshfix(name):
+        raise ModuleNotFoundError(f"No module named {name!r}")
+    monkeypatch.setattr(peers.importlib.resources, "files", no_pymeshfix)
+    monkeypatch.setattr(peers, "reference_silhouette", lambda *a: pytest.fail("rendered before finding the bunny"))
+    rc, _, err = run_cli(["bench", "--peers", "--peers-tools", "paramlod", "--out", "pb"], capsys)
+    assert rc == 2 and "pymeshfix" in err and "--peers-samples" in err, err
+
+
 def test_all_outputs_or_none(work):
     def fail(path):
         raise pl.ParamlodError(f"cannot write {path}")

@@ -516,7 +516,8 @@ def bunny_path() -> str:
     try:
         return str(importlib.resources.files("pymeshfix").joinpath("examples/StanfordBunny.ply"))
     except ModuleNotFoundError:
-        raise ParamlodError("the bunny comes with pymeshfix: pip install pymeshfix") from None
+        raise ParamlodError("--peers-samples: the bunny that is sampled comes with pymeshfix: pip install pymeshfix "
+                            "(or give --peers-samples no counts to leave the sampling out)") from None
 
 
 def sampling_row(tool: str, version: str, n: int, seconds: float, pts, area: float) -> dict:
@@ -601,6 +602,10 @@ def run_peers(args, out_dir, log=print) -> dict:
             result["missing"].append(missing_row(t))
         else:
             present[t] = PEERS[t][3]
+    counts = list(args.peers_samples)
+    samplers = [t for t, kind in present.items() if kind == "sample"]
+    # the sampled mesh is found before the renders, which take minutes
+    bunny = bunny_path() if counts and ("paramlod" in tools or samplers) else None
     specs = [scene_spec(s, size, args.peers_grid) for s in args.peers_scenes]
     renderers = [t for t, kind in present.items() if kind == "render"]
     refs, fields = {}, {}
@@ -661,10 +666,8 @@ def run_peers(args, out_dir, log=print) -> dict:
     if rounds > 1:
         result["matched_rounds"] = [matched(rows) for rows in per_round]
     result["matched"] = matched(result["render"])
-    counts = list(args.peers_samples)
-    samplers = [t for t, kind in present.items() if kind == "sample"]
-    if counts and ("paramlod" in tools or samplers):
-        path = bunny_path()
+    if bunny is not None:
+        path = bunny
         area = float(trimesh.load(path, force="mesh").area)
         if "paramlod" in tools:
             paramlod_sample(path, 1000)   # compiles the kernels: untimed
