@@ -112,6 +112,9 @@ def run_gallery(args) -> int:
     from tqdm import tqdm
 
     folder = Path(args.scenes)
+    if not folder.is_dir():   # the gallery's scenes are the repository's, not the installed package's
+        raise ParamlodError(f"--scenes {folder}: no such folder; the gallery's scenes are in the gallery/ folder "
+                            "of the paramlod repository: run from its root or give --scenes")
     files = sorted(folder.glob("*.toml"))
     if args.only:
         wanted = set(args.only)

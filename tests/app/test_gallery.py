@@ -59,6 +59,13 @@ def test_gallery_command_writes_images_captions_and_markdown(tmp_path):
     assert main(["gallery", "--scenes", str(GALLERY), "--out", str(tmp_path), "--only", "nope"]) == 2
 
 
+def test_gallery_outside_the_repository_says_where_the_scenes_are(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)   # an installed paramlod run elsewhere: no gallery/ folder here
+    assert main(["gallery", "--out", "g"]) == 2
+    err = capsys.readouterr().err
+    assert "--scenes gallery: no such folder" in err and "repository" in err and not (tmp_path / "g").exists()
+
+
 def test_a_scene_whose_data_is_not_prepared_names_the_command(tmp_path, capsys):
     scenes = tmp_path / "scenes"
     scenes.mkdir()
