@@ -137,16 +137,20 @@ def load_scene(path, size=None) -> SceneFile:
     """Read and validate a scene file; ``size`` (w, h) overrides the camera's size (a framing
     camera is then framed for that size)."""
     path = Path(path)
+    # a mesh or surfel file given where a scene belongs (paramlod render bunny.ply): say how to draw it
+    kind = "surfels = { path" if path.suffix.lower() == ".surfels" else "mesh"
+    hint = (f" (a scene file is TOML; to draw this file, name it in one: [[objects]] {kind} = \"{path.name}\""
+            f"{' }' if kind != 'mesh' else ''}, docs/scene-format.md)" if path.suffix.lower() != ".toml" else "")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise SceneError(f"scene file {path} does not exist") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"cannot read scene file {path}: {exc}") from None
+        raise SceneError(f"cannot read scene file {path}: {exc}{hint}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{path}: not valid TOML: {exc}") from None
+        raise SceneError(f"{path}: not valid TOML: {exc}{hint}") from None
     ck = _Checker(path, text)
     ck.unknown(data, TOP_KEYS, "scene", "", None)
 

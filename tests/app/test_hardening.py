@@ -220,6 +220,8 @@ BAD = [
     (["render", S, "--time", "nan"], "--time"),
     (["render", S, "--time", "x"], "--time"),
     (["render", "nope.toml", "-o", "a.png"], "nope.toml"),
+    (["render", str(DATA / "bunny.ply"), "-o", "a.png"], 'mesh = "bunny.ply"'),   # binary: not UTF-8
+    (["render", str(DATA / "bunny.surfels"), "-o", "a.png"], 'surfels = { path = "bunny.surfels" }'),
     (["render", S, "--frobnicate"], "--frobnicate"),
     # info, functions
     (["info", "--frobnicate"], "--frobnicate"),
