@@ -258,7 +258,7 @@ def _scheduler(text: str) -> str:
     try:
         from distributed.comm.addressing import get_address_host_port
     except ImportError:
-        return text   # _Cluster says that Dask is needed
+        return text   # run_job says that Dask is needed (need_dask)
     try:
         get_address_host_port(address)
     except ValueError as exc:
