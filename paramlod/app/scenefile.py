@@ -138,9 +138,9 @@ def load_scene(path, size=None) -> SceneFile:
     camera is then framed for that size)."""
     path = Path(path)
     # a mesh or surfel file given where a scene belongs (paramlod render bunny.ply): say how to draw it
-    kind = "surfels = { path" if path.suffix.lower() == ".surfels" else "mesh"
-    hint = (f" (a scene file is TOML; to draw this file, name it in one: [[objects]] {kind} = \"{path.name}\""
-            f"{' }' if kind != 'mesh' else ''}, docs/scene-format.md)" if path.suffix.lower() != ".toml" else "")
+    entry = (f'surfels = {{ path = "{path.name}" }}' if path.suffix.lower() == ".surfels" else f'mesh = "{path.name}"')
+    hint = (f" (a scene file is TOML; to draw this file, name it in one: [[objects]] {entry}, docs/scene-format.md)"
+            if path.suffix.lower() != ".toml" else "")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

@@ -319,8 +319,8 @@ EXTRA_NEEDS = {
 def _usable_extras(asked) -> list:
     """The extras to measure. Extras asked for by name whose modules are missing stop the bench
     before anything is measured; of the default ones, those are left out with a note."""
-    missing = {e: [m for m in EXTRA_NEEDS.get(e, {}) if importlib.util.find_spec(m) is None]
-               for e in (DEFAULT_EXTRAS if asked is None else asked)}
+    extras = DEFAULT_EXTRAS if asked is None else asked
+    missing = {e: [m for m in EXTRA_NEEDS.get(e, {}) if importlib.util.find_spec(m) is None] for e in extras}
     missing = {e: ms for e, ms in missing.items() if ms}
     if asked is not None and missing:
         raise ParamlodError("; ".join(f"--extras {e} needs {m}: {EXTRA_NEEDS[e][m]}" for e, ms in missing.items()
@@ -328,7 +328,7 @@ def _usable_extras(asked) -> list:
     for e, ms in missing.items():
         print(f"paramlod bench: leaving out the {e} extra: it needs {', '.join(ms)} "
               f"({'; '.join(EXTRA_NEEDS[e][m] for m in ms)})", flush=True)
-    return [e for e in (DEFAULT_EXTRAS if asked is None else asked) if e not in missing]
+    return [e for e in extras if e not in missing]
 
 
 def run_bench(args) -> int:
@@ -339,7 +339,8 @@ def run_bench(args) -> int:
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
         raise ParamlodError(f"unknown scenario(s) {', '.join(unknown)} (available: {', '.join(SCENARIOS)})")
-    args.extras = _usable_extras(args.extras)
+    if not args.peers:   # --peers measures no extras
+        args.extras = _usable_extras(args.extras)
     # the results folder is checked (made, and a file created in it) before anything is measured
     out = check_folder(Path(args.out), "--out", create=True)
     if args.peers:
