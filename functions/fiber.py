@@ -27,7 +27,7 @@ from paramlod import parametric
 from paramlod.dsl import cross, dot, let, normalize, vec3
 from paramlod.errors import FunctionError
 
-from .yarn import CRANE, CURTAIN_LOOPS, CURTAIN_ROWS, curtain_layout, yarn_frame
+from .yarn import CRANE, CURTAIN_LOOPS, CURTAIN_ROWS, check_curtain_size, curtain_layout, yarn_frame
 
 FIBER = {"a": CRANE["a"], "h": CRANE["h"], "d": CRANE["d"], "r": 0.5, "omega": 5.0, "phi": 0.0, "radius": 0.3}
 
@@ -96,6 +96,7 @@ def fiber_curtain(loops: int = CURTAIN_LOOPS, rows: int = CURTAIN_ROWS, fibers: 
     if fibers < 1:
         raise FunctionError(f"fiber_curtain: fibers must be at least 1, got {fibers}")
     spacing = values["h"] + 0.5 if row_spacing is None else float(row_spacing)
+    check_curtain_size(int(loops) * int(rows) * fibers, f"{int(loops)} x {int(rows)} loops of {fibers} fibres")
     i, _, m = curtain_layout(loops, rows, spacing)
     n = len(m) * fibers
     k = np.tile(np.arange(fibers), len(m))

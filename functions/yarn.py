@@ -56,6 +56,17 @@ def yarn_centerline(s, a=CRANE["a"], h=CRANE["h"], d=CRANE["d"]) -> np.ndarray:
     return np.stack([s + a * np.sin(2 * s), h * np.cos(s), d * np.cos(2 * s)], axis=-1)
 
 
+# instances a curtain may have, as a scene file's instance grid: its transforms alone take 64 bytes
+# each (1 GiB at the limit), and the LOD stage holds at most 2^24 patches a buffer
+MAX_CURTAIN_INSTANCES = 1 << 24
+
+
+def check_curtain_size(n: int, what: str) -> None:
+    """A FunctionError, before any array is made, when a curtain of ``n`` instances is too large."""
+    if n > MAX_CURTAIN_INSTANCES:
+        raise FunctionError(f"a curtain of {what} is {n:,} instances, more than {MAX_CURTAIN_INSTANCES:,} (2^24)")
+
+
 def curtain_layout(loops: int = CURTAIN_LOOPS, rows: int = CURTAIN_ROWS, row_spacing: float = 4.5):
     """(loop index, row index, transforms [n, 4, 4] float32) of a loops x rows grid of loops.
 
@@ -65,6 +76,7 @@ def curtain_layout(loops: int = CURTAIN_LOOPS, rows: int = CURTAIN_ROWS, row_spa
     loops, rows = int(loops), int(rows)
     if loops < 1 or rows < 1:
         raise FunctionError(f"a curtain needs at least one loop and one row, got {loops} x {rows}")
+    check_curtain_size(loops * rows, f"{loops} x {rows} loops")
     j, i = np.divmod(np.arange(loops * rows), loops)
     m = np.zeros((loops * rows, 4, 4), np.float32)
     m[:, 0, 0] = m[:, 1, 1] = m[:, 2, 2] = m[:, 3, 3] = 1

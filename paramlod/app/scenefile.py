@@ -100,6 +100,8 @@ class _Checker:
         raise SceneError(f"{at}: {where}: {msg}")
 
     def unknown(self, got: dict, allowed: set, where: str, table: str, index=None):
+        if not isinstance(got, dict):
+            self.fail(where, f"must be a table (fields {', '.join(sorted(allowed))}), got {got!r}", table, index)
         extra = sorted(set(got) - allowed)
         if extra:
             self.fail(f"{where}.{extra[0]}", f"unknown field (allowed: {', '.join(sorted(allowed))})",
@@ -427,7 +429,7 @@ def _instances(o, ck, where, i, allowed: set) -> dict:
         ck.fail(f"{where}.instances", str(exc), "objects", i, "instances")
     try:
         res = builder(**spec.get("args", {}))
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError, ParamlodError) as exc:   # an argument of the wrong kind or size
         ck.fail(f"{where}.instances", f"builder {spec['builder']} failed: {exc}", "objects", i, "instances")
     if not isinstance(res, dict) or "count" not in res or set(res) - allowed:
         got = sorted(res) if isinstance(res, dict) else type(res).__name__

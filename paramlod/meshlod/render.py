@@ -78,7 +78,7 @@ class MeshSettings:
         t = self.threshold_px
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not np.isfinite(t) or t < 0:
             raise MeshError(f"mesh threshold_px must be a finite number of pixels >= 0, got {t!r}")
-        if self.color_by not in COLOR_BY:
+        if not isinstance(self.color_by, str) or self.color_by not in COLOR_BY:
             raise MeshError(f"mesh color_by must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
 
 

@@ -162,6 +162,15 @@ def test_every_objects_variant_with_aa_is_the_frames(tmp_path):
     (SCENE.replace("[camera]", "[meta]\ntitel = 'x'\n\n[camera]"), r"meta.titel: unknown field"),
     (SCENE + "scale = -1\n", r"s.toml:12: objects\[0\].scale: a single scale must be a number > 0"),
     (SCENE.replace("eye = [0, 0, 4]", "direction = [0, 0, 0]"), r"direction must be a finite non-zero vector"),
+    # found by mutating the gallery's scene files: a list where a table belongs, a list as a name,
+    # and a builder asked for a curtain that would take terabytes (it was killed for memory)
+    ("animation = [1, 2]\n" + SCENE, r"s.toml: animation: must be a table \(fields fps, frames, t0, t1\), got \[1, 2\]"),
+    (SCENE.replace("threshold = 60", "threshold = 60\nmesh_color_by = [1]"), r"render.mesh_color_by: mesh color_by must"),
+    (SCENE.replace('function = "sphere"', 'function = "fiber"\ninstances = { builder = "paramlod.functions.fiber:fiber_curtain", '
+                                          'args = { loops = 1000000, rows = 1000000 } }'),
+     r"objects\[0\].instances: .*1000000 x 1000000 loops of 6 fibres is 6,000,000,000,000 instances, more than 16,777,216"),
+    (SCENE.replace('function = "sphere"', 'function = "yarn"\ninstances = { builder = "paramlod.functions.yarn:yarn_curtain", '
+                                          'args = { loops = 1e300 } }'), r"objects\[0\].instances: builder paramlod.functions.yarn:yarn_curtain failed"),
 ])
 def test_malformed_scene_files_name_field_and_line(tmp_path, text, expect):
     p = tmp_path / "s.toml"
