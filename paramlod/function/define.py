@@ -883,8 +883,12 @@ def _check_expr(fname: str, where: str, e, allowed: set, what: str) -> sp.Expr:
                             f"a square root of a negative constant?): {e}"[:400])
     stray = e.free_symbols - allowed
     if stray:
+        # a string ("u") or a Symbol made in the plugin has a known name but is not the symbol passed in
+        alike = sorted(str(x) for x in stray if str(x) in {str(a) for a in allowed})
+        hint = (f" ({', '.join(alike)}: a string or a sympy Symbol made in the plugin, not the argument the "
+                "function is given; use the argument)" if alike else "")
         raise FunctionError(f"plugin '{fname}' ({where}): {what} uses unknown symbol(s) "
-                            f"{sorted(map(str, stray))}; use only u, v and the parameters")
+                            f"{sorted(map(str, stray))}; use only u, v and the parameters{hint}")
     return normalize_expr(e)
 
 

@@ -156,6 +156,13 @@ def test_return_values_that_are_not_three_expressions():
             return u, v, sp.Symbol("w")
     expect_error(r"plugin 'uses_w'.*component z uses unknown symbol\(s\) \['w'\]", stray_symbol)
 
+    def string_u():   # said "unknown symbol(s) ['u']; use only u, v", which read as a contradiction
+        @pl.parametric()
+        def uses_text(u, v):
+            return "u", v, sp.Symbol("v") * 0 + 1
+    expect_error(r"plugin 'uses_text'.*component x uses unknown symbol\(s\) \['u'\].*u: a string or a sympy "
+                 r"Symbol made in the plugin", string_u)
+
     def division_by_zero():
         @pl.parametric()
         def infinite(u, v):
