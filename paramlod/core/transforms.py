@@ -22,6 +22,12 @@ def is_number(x) -> bool:
     return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
 
 
+def in_range(x, lo, hi) -> bool:
+    """``x`` is a real number (``is_number``) in [lo, hi]: settings' checks, which a string or a
+    list given by mistake would otherwise meet with a TypeError."""
+    return is_number(x) and lo <= x <= hi
+
+
 def check_values(values, what: str, stacked: bool = False) -> np.ndarray:
     """``values`` as float64, refused (SceneError naming ``what``) unless finite and within
     PLACE_LIMIT. ``stacked``: ``values`` is a stack of matrices, and the error names the first bad

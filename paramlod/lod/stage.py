@@ -17,7 +17,7 @@ import pyopencl as cl
 from pyopencl import cltypes
 
 from paramlod.core.layouts import CAMERA, LOD_COUNTER, constant
-from paramlod.core.transforms import is_number
+from paramlod.core.transforms import in_range, is_number
 from paramlod.core.views import MAX_VIEWS
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, SceneError
@@ -69,11 +69,12 @@ class LodSettings:
             self.threshold = t = (float(t), float(t))   # one number for both, as a scene file's threshold
         if not (isinstance(t, (tuple, list, np.ndarray)) and len(t) == 2 and all(is_number(x) and x > 0 for x in t)):
             raise SceneError(f"lod threshold must be positive pixels, one number or two (t_u, t_v), got {t!r}")
-        if not 1 <= self.max_steps <= 15:
-            raise SceneError(f"lod max_steps must be in 1..15, got {self.max_steps}")
-        gu, gv = self.initial_grid
-        if not (1 <= gu <= 64 and 1 <= gv <= 64):
-            raise SceneError(f"lod initial_grid must be in 1..64 per axis, got {self.initial_grid}")
+        if not (isinstance(self.max_steps, (int, np.integer)) and in_range(self.max_steps, 1, 15)):
+            raise SceneError(f"lod max_steps must be an integer in 1..15, got {self.max_steps!r}")
+        g = self.initial_grid
+        if not (isinstance(g, (tuple, list, np.ndarray)) and len(g) == 2
+                and all(isinstance(x, (int, np.integer)) and in_range(x, 1, 64) for x in g)):
+            raise SceneError(f"lod initial_grid must be two integers (gu, gv) in 1..64, got {self.initial_grid!r}")
         if not isinstance(self.backface_cull, (bool, np.bool_)):
             raise SceneError(f"lod backface_cull must be true or false, got {self.backface_cull!r}")
         if not (isinstance(self.backface_widen, (int, float, np.floating)) and 0 <= self.backface_widen <= 1):

@@ -21,6 +21,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 from pyopencl.scan import ExclusiveScanKernel
 
+from paramlod.core.transforms import in_range
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, DeviceError, SceneError
 from paramlod.function.programs import kernel
@@ -56,11 +57,11 @@ class SsaaSettings(PointSettings):
             raise SceneError(f"points-ssaa ss must be 2 (2x2 subsamples) or 3 (3x3), got {self.ss}")
         if self.max_side > 4096:
             raise SceneError(f"points-ssaa max_side must be at most 4096, got {self.max_side}")
-        if not 0 <= self.margin <= 64:
+        if not in_range(self.margin, 0, 64):
             raise SceneError(f"points-ssaa margin must be in [0, 64] pixels, got {self.margin}")
-        if not 1 <= self.lod_divisor <= 16:
+        if not in_range(self.lod_divisor, 1, 16):
             raise SceneError(f"points-ssaa lod_divisor must be in [1, 16], got {self.lod_divisor}")
-        if not 1 <= self.max_pairs <= 1 << 31:
+        if not in_range(self.max_pairs, 1, 1 << 31):
             raise SceneError(f"points-ssaa max_pairs must be in [1, 2^31], got {self.max_pairs}")
 
     def factor(self) -> np.float32:

@@ -20,6 +20,7 @@ import numpy as np
 
 from paramlod.core.debug_colors import cluster_color, level_color, tier_color
 from paramlod.core.hashing import hash32
+from paramlod.core.transforms import in_range
 from paramlod.errors import SceneError
 from paramlod.lod.patches import render_tiers
 from paramlod.lod.uploads import WRAP_U, WRAP_V
@@ -76,17 +77,17 @@ class PointSettings:
     thin_tubes: bool = True
 
     def validate(self):
-        if not 0.1 <= self.density <= 16:
+        if not in_range(self.density, 0.1, 16):
             raise SceneError(f"points density must be in [0.1, 16] samples per pixel, got {self.density}")
-        if not 0 <= self.widen <= 0.25:
+        if not in_range(self.widen, 0, 0.25):
             raise SceneError(f"points widen must be in [0, 0.25], got {self.widen}")
-        if not 2 <= self.max_side <= 8192:
+        if not in_range(self.max_side, 2, 8192):
             raise SceneError(f"points max_side must be in [2, 8192], got {self.max_side}")
         if self.sampling not in SAMPLING:
             raise SceneError(f"points sampling must be one of {', '.join(SAMPLING)}, got {self.sampling!r}")
-        if not 1 <= self.oversample <= 8:
+        if not in_range(self.oversample, 1, 8):
             raise SceneError(f"points oversample must be in [1, 8], got {self.oversample}")
-        if not 0 <= self.epsilon <= 0.9:
+        if not in_range(self.epsilon, 0, 0.9):
             raise SceneError(f"points epsilon (step shrink) must be in [0, 0.9], got {self.epsilon}")
         if self.supersample not in (1, 2, 3, 4) or isinstance(self.supersample, bool):
             raise SceneError(f"points supersample must be 1 (off), 2, 3 or 4 subsamples per pixel side, "

@@ -58,6 +58,7 @@ from paramlod.core.camera import Camera
 from paramlod.core.frame import Frame
 from paramlod.core.views import MAX_VIEWS, Views, as_views
 from paramlod.core.layouts import GRID_VERTEX, RENDER_PATCH, glsl_prelude, vertex_format
+from paramlod.core.transforms import in_range
 from paramlod.device.context import cl_device, gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
 from paramlod.errors import FunctionError, SceneError
@@ -211,7 +212,7 @@ class TessSettings:
             raise SceneError(f"tess mode must be one of {', '.join(LEVEL_MODES)}, got {self.mode!r}")
         if not (isinstance(self.chord_px, (int, float)) and 0.01 <= self.chord_px <= 100):
             raise SceneError(f"tess chord_px must be a number of pixels in [0.01, 100], got {self.chord_px!r}")
-        if self.spacing not in SPACINGS:
+        if not isinstance(self.spacing, str) or self.spacing not in SPACINGS:
             raise SceneError(f"tess spacing must be one of {', '.join(SPACINGS)}, got {self.spacing!r}")
         try:
             inner, outer = (float(x) for x in self.levels)
@@ -223,7 +224,7 @@ class TessSettings:
                 raise SceneError(f"tess {name} must be in [1, {MAX_LEVEL:g}], got {val!r}")
         if self.l_min > self.l_max:
             raise SceneError(f"tess l_min ({self.l_min}) is above l_max ({self.l_max})")
-        if not 0 <= self.overlap <= 0.25:
+        if not in_range(self.overlap, 0, 0.25):
             raise SceneError(f"tess overlap must be in [0, 0.25] of a patch's range per side, got {self.overlap!r}")
         parse_aa(self.aa)
         k = self.views_per_pass

@@ -330,6 +330,25 @@ def test_missing_writers_and_meshes_are_named_before_the_work(work, capsys, monk
     assert rc == 2 and "pymeshfix" in err and "--peers-samples" in err, err
 
 
+def test_every_setting_of_another_kind_is_a_named_error():
+    """Each field of each RenderSettings group set to a string, a list, None, a table or NaN validates
+    or fails with a ParamlodError (a string density met '<=' with a TypeError)."""
+    import dataclasses
+
+    groups = [f.name for f in dataclasses.fields(pl.RenderSettings())
+              if dataclasses.is_dataclass(getattr(pl.RenderSettings(), f.name))]
+    assert {"lod", "points", "tess"} <= set(groups)
+    for group in groups:
+        for field in dataclasses.fields(getattr(pl.RenderSettings(), group)):
+            for odd in ("x", [1], None, {"a": 1}, float("nan"), (1, 2, 3)):
+                rs = pl.RenderSettings()
+                setattr(getattr(rs, group), field.name, odd)
+                try:
+                    getattr(rs, group).validate()
+                except pl.ParamlodError:
+                    pass
+
+
 def test_all_outputs_or_none(work):
     def fail(path):
         raise pl.ParamlodError(f"cannot write {path}")
