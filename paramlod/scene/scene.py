@@ -175,10 +175,25 @@ class Scene:
         self.surfels: list[SurfelObject] = []
         self.meshes: list[MeshObject] = []
         self._loaded_meshes: dict = {}   # (source key, lod) -> (the source, kept alive; its MeshLod)
-        self.background = tuple(float(x) for x in background)
+        self.background = background
         self.time = time
         self._version = next(_versions)
         self._cache = None
+
+    @property
+    def background(self) -> tuple:
+        """The colour of pixels no object covers: linear RGB, three finite numbers."""
+        return self._background
+
+    @background.setter
+    def background(self, value):
+        try:
+            rgb = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            rgb = np.full(0, np.nan)
+        if rgb.shape != (3,) or not np.all(np.isfinite(rgb)):
+            raise SceneError(f"scene background must be three finite numbers (linear RGB), got {value!r}")
+        self._background = tuple(float(x) for x in rgb)
 
     @property
     def time(self) -> float:
@@ -211,9 +226,11 @@ class Scene:
         _check_names(variant, aa)
         fn = get_function(fn_or_name)
         self._check_room("use add_instances for many copies of one function")
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+            raise SceneError(f"'{fn.name}': instance count must be an integer of at least 1, got {count!r}")
         count = int(count)
-        if count < 1:
-            raise SceneError(f"'{fn.name}': instance count must be at least 1, got {count}")
+        if material is not None and not isinstance(material, Material):
+            raise SceneError(f"'{fn.name}': material must be a paramlod.Material, got {type(material).__name__}")
         params = dict(params or {})
         for name, val in params.items():
             try:

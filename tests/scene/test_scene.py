@@ -64,6 +64,16 @@ def test_bad_parameters_are_named():
             pl.Material(specular=bad)
         with pytest.raises(pl.SceneError, match="material color must be three numbers"):
             pl.Material(color=(1, bad, 0))
+    # were an AttributeError at render time, a silent int(2.5) and a ValueError at render time
+    with pytest.raises(pl.SceneError, match="'sphere': material must be a paramlod.Material, got tuple"):
+        s.add("sphere", material=(1, 0, 0))
+    for bad in (2.5, "2", True):
+        with pytest.raises(pl.SceneError, match="instance count must be an integer of at least 1"):
+            s.add_instances("sphere", bad)
+    with pytest.raises(pl.SceneError, match="scene background must be three finite numbers"):
+        s.background = "white"
+    with pytest.raises(pl.SceneError, match="scene background must be three finite numbers"):
+        pl.Scene(background=(0, 0, float("inf")))
 
 
 def test_lod_threshold_takes_one_number_or_two():
