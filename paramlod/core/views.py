@@ -127,7 +127,10 @@ def cube_faces(position, size: int = 512, near: float = 0.01, far: float = 1000.
         side = int(size)
     except (TypeError, ValueError):
         raise SceneError(f"cube_faces: size must be whole pixels, got {size!r}") from None
-    p = np.asarray(position, np.float64).reshape(-1)
+    try:
+        p = np.asarray(position, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        p = np.full(0, np.nan)
     if p.shape != (3,):
         raise SceneError(f"cube_faces: position must be three numbers, got {position!r}")
     return [Camera.look_at(p, p + np.asarray(d, float), up, 90.0, (side, side), near, far) for _, d, up in CUBE_FACES]
@@ -138,8 +141,13 @@ def equirect(frames, cameras, height: int | None = None) -> np.ndarray:
     ``cube_faces`` cameras (``cameras``, in the same order): each output pixel's direction is looked
     up in the face it points into (nearest pixel). Longitude 0 looks along -Z, increasing towards +X;
     the top row looks up (+Y)."""
-    if len(frames) != 6 or len(cameras) != 6:
-        raise SceneError(f"equirect needs the six cube_faces frames and cameras, got {len(frames)} and {len(cameras)}")
+    def count(x):
+        return len(x) if isinstance(x, (list, tuple)) else type(x).__name__
+    if count(frames) != 6 or count(cameras) != 6:
+        raise SceneError(f"equirect needs the six cube_faces frames and cameras (lists), got {count(frames)} and "
+                         f"{count(cameras)}")
+    if not all(isinstance(c, Camera) for c in cameras) or not all(hasattr(f, "rgb8") for f in frames):
+        raise SceneError("equirect needs paramlod Frames (render_views' result) and the cube_faces cameras")
     side = cameras[0].size[0]
     h = int(height or side * 2)
     w = 2 * h

@@ -85,7 +85,9 @@ class Pipeline:
                              "scene.add_surfels(...)")
         if time_ is not None:
             scene.time = time_
-        settings = settings or RenderSettings()
+        settings = RenderSettings() if settings is None else settings
+        if not isinstance(settings, RenderSettings):
+            raise SceneError(f"render's settings must be a paramlod.RenderSettings, got {type(settings).__name__}")
         settings.points.validate()
         st = self.state(scene)
         frames = []

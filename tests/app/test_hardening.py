@@ -349,6 +349,23 @@ def test_every_setting_of_another_kind_is_a_named_error():
                     pass
 
 
+def test_api_arguments_of_another_kind_are_named_errors():
+    """Were a ValueError from numpy, a TypeError from len(None), an AttributeError on a dict and a
+    ValueError from numpy."""
+    from paramlod import views
+
+    scene = pl.Scene()
+    scene.add("torus")
+    cam = pl.Camera.look_at((0, -3, 2), (0, 0, 0), up=(0, 0, 1), size=(16, 12))
+    for call, needle in ((lambda: views.cube_faces("x"), "cube_faces: position must be three numbers"),
+                         (lambda: views.equirect([1, 2], None), "equirect needs the six cube_faces frames"),
+                         (lambda: views.equirect([1] * 6, [cam] * 6), "equirect needs paramlod Frames"),
+                         (lambda: pl.render(scene, cam, settings={"lod": 1}), "settings must be a paramlod.RenderSettings"),
+                         (lambda: pl.evaluate("torus", "a", 0), "evaluate 'torus': u must be numbers")):
+        with pytest.raises(pl.ParamlodError, match=re.escape(needle)):
+            call()
+
+
 def test_all_outputs_or_none(work):
     def fail(path):
         raise pl.ParamlodError(f"cannot write {path}")
