@@ -85,3 +85,22 @@ def test_bench_measures_meshes_with_and_without_lod(tmp_path):
             assert lod["triangle_ratio_vs_full"] > 1
     assert m["cut_alone"][0]["tests"] >= 10 ** 6 * 0.9
     assert "## Meshes" in (tmp_path / "results.md").read_text()
+
+
+def test_bench_on_a_cpu_takes_the_cpu_defaults_and_says_so(tmp_path, capsys):
+    """Without --size, --distances, --frames and --warmup a CPU device runs 640x360 at the framing
+    distance, 3 frames after 1 (the GPU's 1080p orbit at four distances is hours of frames there);
+    what is given stays as given."""
+    from paramlod.device.context import cl_device
+
+    assert not cl_device().is_gpu   # the test machines' PoCL
+    assert main(["bench", "sphere", "--variants", "points", "--extras", "--out", str(tmp_path / "a")]) == 0
+    res = json.loads((tmp_path / "a" / "results.json").read_text())
+    assert (res["size"], res["frames"], res["warmup"]) == ([640, 360], 3, 1)
+    assert [r["distance"] for r in res["scenarios"]["sphere"]["variants"]["points"]] == [1.0]
+    assert "on a CPU device the defaults are 640x360" in capsys.readouterr().out
+    assert main(["bench", "sphere", "--variants", "points", "--extras", "--size", "64x48", "--distances", "2",
+                 "--frames", "2", "--warmup", "0", "--out", str(tmp_path / "b")]) == 0
+    res = json.loads((tmp_path / "b" / "results.json").read_text())
+    assert (res["size"], res["frames"], res["warmup"]) == ([64, 48], 2, 0)
+    assert "defaults are" not in capsys.readouterr().out

@@ -72,16 +72,38 @@ DEFAULT_VARIANTS = ["points", "points-4xSS", "points-ssaa", "tess", "tess-4xSS+8
 NO_CULLING = "(no culling)"   # the label of rows measured with --culling off / both
 
 
+# --size, --distances, --frames and --warmup when not given, by the kind of OpenCL device: the
+# thesis's 1080p orbit at four distances on a GPU; on a CPU that is hours of frames (the fibre
+# curtain's tess-4xSS+8xMS on llvmpipe alone), so a smaller frame at the framing distance
+RUN_DEFAULTS = {"GPU": {"size": (1920, 1080), "distances": (0.35, 0.6, 1.0, 2.0), "frames": 8, "warmup": 2},
+                "CPU": {"size": (640, 360), "distances": (1.0,), "frames": 3, "warmup": 1}}
+
+
+def apply_run_defaults(args, kind: str) -> list[str]:
+    """Fill the run options not given with ``kind``'s (RUN_DEFAULTS); the names of those filled."""
+    filled = []
+    for name, value in RUN_DEFAULTS[kind].items():
+        if getattr(args, name, None) is None:
+            setattr(args, name, list(value) if name == "distances" else value)
+            filled.append(name)
+    return filled
+
+
 def add_arguments(p):
     p.add_argument("scenarios", nargs="*", help=f"scenarios (default: {' '.join(DEFAULT)}; all: "
                                                 f"{' '.join(SCENARIOS)})")
     p.add_argument("--variants", nargs="+", default=DEFAULT_VARIANTS, choices=list(VARIANTS),
                    help="render variants (default: all five)")
-    add_size(p, "1920x1080", what="frame size")
-    p.add_argument("--distances", type=positive_float, nargs="+", default=[0.35, 0.6, 1.0, 2.0],
-                   help="camera distances as multiples of the framing distance (default 0.35 0.6 1 2)")
-    p.add_argument("--frames", type=positive_int, default=8, help="timed frames per orbit (default 8)")
-    p.add_argument("--warmup", type=non_negative_int, default=2, help="untimed frames before each orbit (default 2)")
+    gpu, cpu = RUN_DEFAULTS["GPU"], RUN_DEFAULTS["CPU"]
+    add_size(p, what="frame size")
+    p.add_argument("--distances", type=positive_float, nargs="+", default=None,
+                   help="camera distances as multiples of the framing distance (default "
+                        f"{' '.join(f'{d:g}' for d in gpu['distances'])} on a GPU, "
+                        f"{' '.join(f'{d:g}' for d in cpu['distances'])} on a CPU)")
+    p.add_argument("--frames", type=positive_int, default=None,
+                   help=f"timed frames per orbit (default {gpu['frames']} on a GPU, {cpu['frames']} on a CPU)")
+    p.add_argument("--warmup", type=non_negative_int, default=None,
+                   help=f"untimed frames before each orbit (default {gpu['warmup']} on a GPU, {cpu['warmup']} on a CPU)")
     p.add_argument("--extras", nargs="*", default=None,
                    choices=["ceilings", "functions", "surfels", "meshes", "mesh-eval", "skinned", "viewer", "multiview",
                             "hybrid"],
@@ -332,7 +354,6 @@ def _usable_extras(asked) -> list:
 
 
 def run_bench(args) -> int:
-    size = args.size
     names = [] if args.only_extras else args.scenarios or DEFAULT
     if args.only_extras and args.scenarios:
         raise ParamlodError(f"--only-extras skips the scenarios; leave out {' '.join(args.scenarios)} or the option")
@@ -349,7 +370,15 @@ def run_bench(args) -> int:
         print(f"results: {out / 'peers.json'}, {out / 'peers.md'}")
         return 0
     dev = cl_device()
-    result = {"device": dev.name, "device_type": "GPU" if dev.is_gpu else "CPU", "host": platform.node(),
+    kind = "GPU" if dev.is_gpu else "CPU"
+    filled = apply_run_defaults(args, kind)
+    if kind == "CPU" and filled:
+        print(f"paramlod bench: on a CPU device the defaults are {args.size[0]}x{args.size[1]}, distances "
+              f"{' '.join(f'{d:g}' for d in args.distances)}, {args.frames} frames after {args.warmup} warm-up "
+              f"(a GPU's: 1920x1080, 0.35 0.6 1 2, 8 after 2, hours of frames here); set --size, --distances, "
+              "--frames, --warmup to change them", flush=True)
+    size = args.size
+    result = {"device": dev.name, "device_type": kind, "host": platform.node(),
               "size": list(size), "frames": args.frames, "warmup": args.warmup, "detail_angle": args.detail_angle,
               "scenarios": {}}
 
