@@ -190,7 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     v = sub.add_parser("view", help="an interactive window: fly through a scene, a plugin file or a function, "
                                      "reloaded when its files change (docs/viewer.md)")
-    v.add_argument("source", help="a scene file (.toml), a plugin file (.py) or a function name (see `paramlod functions`)")
+    v.add_argument("source", help="a scene file (.toml), a plugin file (.py), a mesh file (OBJ, PLY, STL, OFF, glTF, "
+                                  "GIfTI, .meshlod), a .surfels file or a function name (see `paramlod functions`)")
     add_size(v, what="window size (default: the scene camera's, or 1280x720)")
     v.add_argument("--variant", help="render variant to start with (V cycles them)")
     v.add_argument("--aa", help="anti-aliasing mode to start with, e.g. 4xSS (B cycles them)")

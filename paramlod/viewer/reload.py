@@ -20,7 +20,9 @@ from paramlod.function.define import ParametricFunction
 from paramlod.function.plugins import load_plugin_file, validate
 from paramlod.pipeline.plan import check_variant
 from paramlod.pipeline.settings import RenderSettings
+from paramlod.meshlod.format import SUFFIX as MESHLOD_SUFFIX
 from paramlod.scene.framing import framing_camera, scene_box
+from paramlod.scene.meshes import MESH_TYPES
 from paramlod.scene.scene import Scene
 
 POLL_SECONDS = 0.2
@@ -50,6 +52,19 @@ class Loaded:
     animation: dict | None = None                   # a scene file's [animation]: t0, t1 (the viewer loops it)
 
 
+def source_kind(path: Path) -> str:
+    """What a ``paramlod view`` argument names, by its suffix: "scene", "plugin", "mesh" (a mesh
+    file or a built .meshlod), "surfels" or "function" (a registered name)."""
+    suffix = path.suffix.lower()
+    if suffix == ".toml":
+        return "scene"
+    if suffix == ".py":
+        return "plugin"
+    if suffix in MESH_TYPES or suffix == MESHLOD_SUFFIX:
+        return "mesh"
+    return "surfels" if suffix == ".surfels" else "function"
+
+
 def _plugin_files(functions) -> list[Path]:
     """Source files of plugin functions (built-ins and entry points are not watched)."""
     out = []
@@ -60,7 +75,8 @@ def _plugin_files(functions) -> list[Path]:
 
 
 class Source:
-    """``spec``: a scene file (.toml), a plugin file (.py) or a registered function's name.
+    """``spec``: a scene file (.toml), a plugin file (.py), a mesh file (OBJ, PLY, STL, OFF, glTF,
+    GIfTI, .meshlod), a .surfels file or a registered function's name.
     ``load()`` (re)loads it; plugin folders of the registry are loaded again when one of their
     files changed, so a scene naming a plugin function sees the edit."""
 
@@ -68,9 +84,9 @@ class Source:
         self.spec, self.size, self.variant, self.aa = str(spec), size, variant, aa
         check_variant(variant)   # at start, as `paramlod render --variant` refuses it
         path = Path(self.spec)
-        self.kind = "scene" if path.suffix.lower() == ".toml" else "plugin" if path.suffix.lower() == ".py" else "function"
+        self.kind = source_kind(path)
         if self.kind != "function" and not path.is_file():
-            what = "scene file" if self.kind == "scene" else "plugin file"
+            what = {"scene": "scene file", "plugin": "plugin file", "mesh": "mesh file", "surfels": "surfel file"}[self.kind]
             raise ParamlodError(f"{what} {path} does not exist" if not path.exists() else f"{what} {path} is not a file")
         self.path = path.resolve() if self.kind != "function" else None
         self.function_index = 0
@@ -99,6 +115,8 @@ class Source:
             return self._fixed
         if self.kind == "scene":
             return self._scene()
+        if self.kind in ("mesh", "surfels"):
+            return self._file_object()
         if self.kind == "plugin":
             funcs = load_plugin_file(self.path)
             if not funcs:
@@ -124,6 +142,20 @@ class Source:
             up = (0.0, 1.0, 0.0)   # load_scene has checked the field; this only reads it back
         return Loaded(sf.scene, sf.camera, sf.settings, variant, self.path.name,
                       [self.path, *_plugin_files(sf.scene.functions())], up, animation=sf.animation)
+
+    def _file_object(self) -> Loaded:
+        """A mesh (its cluster DAG, drawn by meshlets) or a surfel set alone, framed."""
+        scene = Scene()
+        if self.kind == "mesh":
+            scene.add_mesh(str(self.path))
+        else:
+            scene.add_surfels(str(self.path))
+        settings = RenderSettings()
+        variant = self.variant or ("meshlets" if self.kind == "mesh" else "points")
+        if self.aa:
+            settings.apply_aa(self.aa, points_only=variant == "points", variant=variant)
+        camera = framing_camera(scene, size=tuple(self.size or DEFAULT_SIZE))
+        return Loaded(scene, camera, settings, variant, self.path.name, [self.path], box=scene_box(scene))
 
     def _one_function(self, fn: ParametricFunction, label: str) -> Loaded:
         scene = Scene()

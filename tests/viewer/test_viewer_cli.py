@@ -2,6 +2,7 @@
 (the CLI's message and exit code 2), and no display (a message naming the headless modes)."""
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -77,6 +78,24 @@ def test_frames_without_a_script_run_headless(tmp_path, capsys, no_display):
     code, out, err = run(["view", "torus", "--size", "48x32", "--frames", "2", "--record", str(tmp_path / "r")], capsys)
     assert code == 0, err
     assert len(list((tmp_path / "r").glob("frame_*.png"))) == 2
+
+
+def test_a_mesh_file_and_a_surfel_file_are_sources(tmp_path, capsys, no_display):
+    """`paramlod view bunny.ply` drew nothing: it was taken for a function name."""
+    import trimesh
+
+    data = Path(__file__).resolve().parents[2] / "gallery" / "data"
+    mesh = tmp_path / "ico.ply"
+    trimesh.creation.icosphere(subdivisions=3).export(mesh)
+    for source, name in ((mesh, "mesh"), (data / "bunny.surfels", "surfels")):
+        code, _, err = run(["view", str(source), "--size", "48x32", "--frames", "1", "--record", str(tmp_path / name)],
+                           capsys)
+        assert code == 0, err
+        (png,) = (tmp_path / name).glob("frame_*.png")
+        img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+        assert (np.abs(img - img[0, 0]).sum(axis=-1) > 30).mean() > 0.1   # framed: it covers the frame's middle
+    code, _, err = run(["view", str(tmp_path / "missing.ply"), "--frames", "1"], capsys)
+    assert code == 2 and "mesh file" in err and "does not exist" in err
 
 
 @pytest.mark.parametrize("text,message", [
