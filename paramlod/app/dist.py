@@ -38,7 +38,7 @@ from typing import Callable
 import numpy as np
 
 from paramlod.app.args import check_folder, non_negative_int, parse_size, positive_int
-from paramlod.app.scenefile import load_scene
+from paramlod.app.scenefile import file_object_kind, load_scene
 from paramlod.core.camera import Camera
 from paramlod.core.files import write_atomically
 from paramlod.device import context as device_context
@@ -658,7 +658,10 @@ def _scene_entry(path, size, variant, aa, cache: bool = True) -> dict:
 
 
 def _raw_tables(path) -> dict:
-    """The scene file's TOML (load_scene has validated what it knows of it)."""
+    """The scene file's TOML (load_scene has validated what it knows of it); {} for a mesh or
+    surfel file drawn alone."""
+    if file_object_kind(path):
+        return {}
     return tomllib.loads(Path(path).read_text(encoding="utf-8"))
 
 

@@ -26,8 +26,10 @@ from paramlod.pipeline.settings import RenderSettings
 from paramlod.renderers.registry import KINDS, variants
 from paramlod.renderers.points import PointSettings
 from paramlod.renderers.tess import TessSettings
+from paramlod.meshlod.format import SUFFIX as MESHLOD_SUFFIX
 from paramlod.scene.framing import framing_camera
 from paramlod.scene.handoff import DEFAULT_BLEND
+from paramlod.scene.meshes import MESH_TYPES
 from paramlod.scene.scene import Material, Scene
 from paramlod.surfels.render import FixedCount, FixedSize
 
@@ -135,14 +137,40 @@ class _Checker:
         return v
 
 
+def file_object_kind(path) -> str | None:
+    """"mesh" (a mesh file or a built .meshlod) or "surfels" (a .surfels file) for a file that
+    is drawn alone where a scene file is expected; None for anything else (a scene file)."""
+    suffix = Path(path).suffix.lower()
+    if suffix in MESH_TYPES or suffix == MESHLOD_SUFFIX:
+        return "mesh"
+    return "surfels" if suffix == ".surfels" else None
+
+
+def _file_object_scene(path: Path, kind: str, size) -> SceneFile:
+    """A mesh or surfel file alone: its default material and LOD, framed, at ``size`` or 960x540;
+    meshes drawn by meshlets."""
+    if not path.is_file():
+        what = "mesh file" if kind == "mesh" else "surfel file"
+        raise SceneError(f"{what} {path} does not exist" if not path.exists() else f"{what} {path} is not a file")
+    scene = Scene()
+    if kind == "mesh":
+        scene.add_mesh(str(path))
+    else:
+        scene.add_surfels(str(path))
+    camera = framing_camera(scene, size=tuple(size) if size else (960, 540))
+    return SceneFile(scene, camera, RenderSettings(), "meshlets" if kind == "mesh" else "points", path)
+
+
 def load_scene(path, size=None) -> SceneFile:
     """Read and validate a scene file; ``size`` (w, h) overrides the camera's size (a framing
-    camera is then framed for that size)."""
+    camera is then framed for that size). A mesh file (OBJ, PLY, STL, OFF, glTF, GIfTI, .meshlod)
+    or a .surfels file is a scene of that one object, framed."""
     path = Path(path)
-    # a mesh or surfel file given where a scene belongs (paramlod render bunny.ply): say how to draw it
-    entry = (f'surfels = {{ path = "{path.name}" }}' if path.suffix.lower() == ".surfels" else f'mesh = "{path.name}"')
-    hint = (f" (a scene file is TOML; to draw this file, name it in one: [[objects]] {entry}, docs/scene-format.md)"
-            if path.suffix.lower() != ".toml" else "")
+    kind = file_object_kind(path)
+    if kind is not None:
+        return _file_object_scene(path, kind, size)
+    hint = (f" (a scene file is TOML; a mesh ({', '.join(s[1:].upper() for s in MESH_TYPES)}, .meshlod) or "
+            ".surfels file is drawn as it is, by its suffix)" if path.suffix.lower() != ".toml" else "")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

@@ -14,15 +14,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from paramlod.app import dist
+from paramlod.app.scenefile import file_object_kind
 from paramlod.errors import FunctionError, ParamlodError
 from paramlod.function import registry
 from paramlod.function.define import ParametricFunction
 from paramlod.function.plugins import load_plugin_file, validate
 from paramlod.pipeline.plan import check_variant
 from paramlod.pipeline.settings import RenderSettings
-from paramlod.meshlod.format import SUFFIX as MESHLOD_SUFFIX
 from paramlod.scene.framing import framing_camera, scene_box
-from paramlod.scene.meshes import MESH_TYPES
 from paramlod.scene.scene import Scene
 
 POLL_SECONDS = 0.2
@@ -52,19 +51,6 @@ class Loaded:
     animation: dict | None = None                   # a scene file's [animation]: t0, t1 (the viewer loops it)
 
 
-def source_kind(path: Path) -> str:
-    """What a ``paramlod view`` argument names, by its suffix: "scene", "plugin", "mesh" (a mesh
-    file or a built .meshlod), "surfels" or "function" (a registered name)."""
-    suffix = path.suffix.lower()
-    if suffix == ".toml":
-        return "scene"
-    if suffix == ".py":
-        return "plugin"
-    if suffix in MESH_TYPES or suffix == MESHLOD_SUFFIX:
-        return "mesh"
-    return "surfels" if suffix == ".surfels" else "function"
-
-
 def _plugin_files(functions) -> list[Path]:
     """Source files of plugin functions (built-ins and entry points are not watched)."""
     out = []
@@ -84,9 +70,13 @@ class Source:
         self.spec, self.size, self.variant, self.aa = str(spec), size, variant, aa
         check_variant(variant)   # at start, as `paramlod render --variant` refuses it
         path = Path(self.spec)
-        self.kind = source_kind(path)
+        suffix = path.suffix.lower()
+        # a mesh or surfel file loads as a scene of that one object (paramlod.app.scenefile)
+        self.kind = ("scene" if suffix == ".toml" or file_object_kind(path) else "plugin" if suffix == ".py"
+                     else "function")
         if self.kind != "function" and not path.is_file():
-            what = {"scene": "scene file", "plugin": "plugin file", "mesh": "mesh file", "surfels": "surfel file"}[self.kind]
+            what = ("plugin file" if self.kind == "plugin" else
+                    {"mesh": "mesh file", "surfels": "surfel file"}.get(file_object_kind(path), "scene file"))
             raise ParamlodError(f"{what} {path} does not exist" if not path.exists() else f"{what} {path} is not a file")
         self.path = path.resolve() if self.kind != "function" else None
         self.function_index = 0
@@ -115,8 +105,6 @@ class Source:
             return self._fixed
         if self.kind == "scene":
             return self._scene()
-        if self.kind in ("mesh", "surfels"):
-            return self._file_object()
         if self.kind == "plugin":
             funcs = load_plugin_file(self.path)
             if not funcs:
@@ -135,27 +123,15 @@ class Source:
 
     def _scene(self) -> Loaded:
         sf, variant = dist.prepare_scene(self.path, self.size, self.variant, self.aa, cache=False)
-        try:
-            up = tuple(float(x) for x in tomllib.loads(self.path.read_text(encoding="utf-8"))
-                       .get("camera", {}).get("up", [0.0, 1.0, 0.0]))
-        except (OSError, tomllib.TOMLDecodeError, TypeError, ValueError):
-            up = (0.0, 1.0, 0.0)   # load_scene has checked the field; this only reads it back
+        up = (0.0, 1.0, 0.0)
+        if not file_object_kind(self.path):
+            try:
+                up = tuple(float(x) for x in tomllib.loads(self.path.read_text(encoding="utf-8"))
+                           .get("camera", {}).get("up", [0.0, 1.0, 0.0]))
+            except (OSError, tomllib.TOMLDecodeError, TypeError, ValueError):
+                pass   # load_scene has checked the field; this only reads it back
         return Loaded(sf.scene, sf.camera, sf.settings, variant, self.path.name,
                       [self.path, *_plugin_files(sf.scene.functions())], up, animation=sf.animation)
-
-    def _file_object(self) -> Loaded:
-        """A mesh (its cluster DAG, drawn by meshlets) or a surfel set alone, framed."""
-        scene = Scene()
-        if self.kind == "mesh":
-            scene.add_mesh(str(self.path))
-        else:
-            scene.add_surfels(str(self.path))
-        settings = RenderSettings()
-        variant = self.variant or ("meshlets" if self.kind == "mesh" else "points")
-        if self.aa:
-            settings.apply_aa(self.aa, points_only=variant == "points", variant=variant)
-        camera = framing_camera(scene, size=tuple(self.size or DEFAULT_SIZE))
-        return Loaded(scene, camera, settings, variant, self.path.name, [self.path], box=scene_box(scene))
 
     def _one_function(self, fn: ParametricFunction, label: str) -> Loaded:
         scene = Scene()

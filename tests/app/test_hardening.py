@@ -220,8 +220,7 @@ BAD = [
     (["render", S, "--time", "nan"], "--time"),
     (["render", S, "--time", "x"], "--time"),
     (["render", "nope.toml", "-o", "a.png"], "nope.toml"),
-    (["render", str(DATA / "bunny.ply"), "-o", "a.png"], 'mesh = "bunny.ply"'),   # binary: not UTF-8
-    (["render", str(DATA / "bunny.surfels"), "-o", "a.png"], 'surfels = { path = "bunny.surfels" }'),
+    (["render", "afile", "-o", "a.png"], "a scene file is TOML"),
     (["render", S, "--frobnicate"], "--frobnicate"),
     # info, functions
     (["info", "--frobnicate"], "--frobnicate"),
@@ -364,6 +363,23 @@ def test_api_arguments_of_another_kind_are_named_errors():
                          (lambda: pl.evaluate("torus", "a", 0), "evaluate 'torus': u must be numbers")):
         with pytest.raises(pl.ParamlodError, match=re.escape(needle)):
             call()
+
+
+def test_a_mesh_or_surfel_file_renders_as_it_is(work, capsys):
+    """`paramlod render bunny.ply` was a UTF-8 decoding error: a mesh or surfel file is a scene of
+    that one object, framed (a job of frames too)."""
+    from PIL import Image
+
+    for source, out in ((DATA / "bunny.ply", "m.png"), (DATA / "bunny.surfels", "s.png")):
+        rc, _, err = run_cli(["render", str(source), "--size", "64x48", "-o", out], capsys)
+        assert rc == 0, err
+        img = np.asarray(Image.open(work / out).convert("RGB")).astype(int)
+        assert (np.abs(img - img[0, 0]).sum(axis=-1) > 30).mean() > 0.1
+    rc, _, err = run_cli(["render", str(DATA / "bunny.ply"), "--size", "32x24", "--turntable", "2", "-o",
+                          "t_{frame}.png"], capsys)
+    assert rc == 0 and len(list(work.glob("t_*.png"))) == 2, err
+    rc, _, err = run_cli(["render", "nope.ply", "-o", "n.png"], capsys)
+    assert rc == 2 and "mesh file nope.ply does not exist" in err
 
 
 def test_all_outputs_or_none(work):
