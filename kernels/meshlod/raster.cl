@@ -42,15 +42,7 @@
 #define RS_GUARD ((float)RS_GUARD_PIXELS)
 #define RS_POLY 8           // a triangle clipped by 5 planes has at most 8 vertices
 
-// counters (ulong), paramlod.meshlod.raster.COUNTERS
-#define RS_TRIANGLES 0      // triangles of the selected clusters (times their views)
-#define RS_NEAR_CLIPPED 1   // of them crossing the near plane
-#define RS_CULLED 2         // of them drawing nothing: behind near, beyond far, not finite,
-                            // degenerate, off screen or between pixel centres
-#define RS_LARGE 3          // fan triangles sent to the large list (the list's length, may pass its capacity)
-#define RS_OVERFLOW 4       // of them beyond the list's capacity (the caller grows it and redraws)
-#define RS_PIXELS 5         // pixels covered (inside a triangle, depth in [near, far])
-#define RS_ATOMICS 6        // colour atomics issued
+// counters (ulong): RS_* of the prelude (paramlod.core.layouts.RASTER_COUNTER)
 
 typedef struct {
     float3 e[RS_POLY];      // view-space positions
@@ -275,7 +267,7 @@ void raster_clusters(__global const float4* vertices, __global const float4* nor
                 if ((ulong)(t.x1 - t.x0 + 1) * (ulong)(t.y1 - t.y0 + 1) > (ulong)large_pixels) {
                     ulong at = atom_inc(&counters[RS_LARGE]);
                     if (at < large_capacity) large[at] = (uint4)(inst, cluster, tri, (uint)j | (v << 16));
-                    else atom_inc(&counters[RS_OVERFLOW]);
+                    else atom_inc(&counters[RS_LARGE_OVERFLOW]);
                     continue;
                 }
                 long s0 = -t.dy[0] * RS_ONE, s1 = -t.dy[1] * RS_ONE, s2 = -t.dy[2] * RS_ONE;

@@ -530,10 +530,10 @@ inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* 
     }
     if (l == 0) {
         ulong4 t = red[0];
-        if (t.x) atom_add(&counters[0], t.x);
-        if (t.y) atom_add(&counters[1], t.y);
-        if (t.z) atom_add(&counters[2], t.z);
-        if (t.w) atom_add(&counters[3], t.w);
+        if (t.x) atom_add(&counters[PTS_SAMPLES], t.x);
+        if (t.y) atom_add(&counters[PTS_ATOMICS], t.y);
+        if (t.z) atom_add(&counters[PTS_NAN_SAMPLES], t.z);
+        if (t.w) atom_add(&counters[PTS_CAPPED_PATCHES], t.w);
     }
 }
 
@@ -553,12 +553,10 @@ inline void add_counters(__global ulong* counters, ulong4 mine, __local ulong4* 
 // capped at the list's capacity), so the host enqueues the LOD stage and these kernels without
 // waiting in between.
 
-// counters[SCHED_AT] = patches listed << CHUNK_BITS | units listed so far (zeroed with the
-// renderer's counters before points_schedule); counters[UNITS_AT]: the most units a list of the
-// frame had (paramlod/renderers/points.py refuses a frame past MAX_UNITS: order[] numbers units
-// in 32 bits)
-#define SCHED_AT 4
-#define UNITS_AT 5
+// counters: PTS_* of the prelude (paramlod.core.layouts.POINTS_COUNTER). counters[PTS_SCHED] =
+// patches listed << CHUNK_BITS | units listed so far (zeroed with the renderer's counters before
+// points_schedule); counters[PTS_UNITS]: the most units a list of the frame had
+// (paramlod/renderers/points.py refuses a frame past MAX_UNITS: order[] numbers units in 32 bits)
 #define CHUNK_BITS 40
 #ifndef PL_PACK
 #define PL_PACK 1
@@ -708,7 +706,7 @@ void points_schedule(__global const RenderPatch* patches, __global const uint* c
             sum[l] += add;
             barrier(CLK_LOCAL_MEM_FENCE);
         }
-        if (l == POINTS_LOCAL - 1u) group_first = sum[l] ? atom_add(&counters[SCHED_AT], sum[l]) : 0ul;
+        if (l == POINTS_LOCAL - 1u) group_first = sum[l] ? atom_add(&counters[PTS_SCHED], sum[l]) : 0ul;
         barrier(CLK_LOCAL_MEM_FENCE);
         ulong old = group_first + sum[l] - mine;
         if (mine) order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
@@ -718,7 +716,7 @@ void points_schedule(__global const RenderPatch* patches, __global const uint* c
     for (uint pid = get_global_id(0); pid < n_patches; pid += get_global_size(0)) {
         ulong mine = schedule_units(patches, pid, inst_f, inst_u, factor, curve, measure, max_side, tier);
         if (!mine) continue;
-        ulong old = atom_add(&counters[SCHED_AT], mine);
+        ulong old = atom_add(&counters[PTS_SCHED], mine);
         order[old >> CHUNK_BITS] = (old & CHUNK_MASK) << 32 | (ulong)pid;
     }
 #endif
@@ -753,9 +751,9 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
 #endif
                    )
 {
-    uint n_patches = (uint)(counters[SCHED_AT] >> CHUNK_BITS);   // the patches listed
-    ulong total = counters[SCHED_AT] & CHUNK_MASK;
-    if (get_global_id(0) == 0) atom_max(&counters[UNITS_AT], total);
+    uint n_patches = (uint)(counters[PTS_SCHED] >> CHUNK_BITS);   // the patches listed
+    ulong total = counters[PTS_SCHED] & CHUNK_MASK;
+    if (get_global_id(0) == 0) atom_max(&counters[PTS_UNITS], total);
     if (total > 0xFFFFFFFFul - POINTS_LOCAL) return;   // refused by the host, drawn by nothing
     ulong groups = get_num_groups(0), group = get_group_id(0);
     uint c = (uint)(group * total / groups), c_end = (uint)((group + 1) * total / groups);
@@ -946,9 +944,9 @@ void points_direct(__global const RenderPatch* patches, __global const ulong* or
     __local ulong4 red[POINTS_LOCAL];
     add_counters(counters, (ulong4)(n_samples, n_atomics, n_nan, n_capped), red);
 #else   // CPU devices: a barrier here makes PoCL's compiled work-group loops much slower
-    if (n_samples) atom_add(&counters[0], n_samples);
-    if (n_atomics) atom_add(&counters[1], n_atomics);
-    if (n_nan) atom_add(&counters[2], n_nan);
-    if (n_capped) atom_add(&counters[3], n_capped);
+    if (n_samples) atom_add(&counters[PTS_SAMPLES], n_samples);
+    if (n_atomics) atom_add(&counters[PTS_ATOMICS], n_atomics);
+    if (n_nan) atom_add(&counters[PTS_NAN_SAMPLES], n_nan);
+    if (n_capped) atom_add(&counters[PTS_CAPPED_PATCHES], n_capped);
 #endif
 }

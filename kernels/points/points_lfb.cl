@@ -25,26 +25,13 @@
 #define LFB_SIDE (PL_TILE * PL_SS)
 #define LFB_SIZE (LFB_SIDE * LFB_SIDE)
 
-// lfb_count / points_lfb counters (paramlod/points_lfb.py LFB_COUNTERS, same order).
-#define C_PAIRS 0        // (tile, patch) pairs
-#define C_UNPLACED 1     // patches whose box touches no tile (no sample in front, or off screen)
-#define C_SAMPLES 2      // samples evaluated, every tile that lists the patch counted
-#define C_UNIQUE 3       // samples of the grids, each patch counted once
-#define C_NAN 4          // NaN/inf samples, each patch counted once
-#define C_MISS 5         // drawable samples that fell in a tile the patch's box did not reach
-#define C_LOCAL 6        // local atom_min issued (after the early-depth read)
-#define C_HITS 7         // samples that landed in the tile being rendered
-#define C_ATOMICS 8      // global atom_min issued by the resolve (colour buffer)
-#define C_PIXELS 9       // pixels resolved (at least one covered subsample)
-#define C_COVERED 10     // covered subsamples over all resolved pixels
-#define C_CAPPED 11      // patches that hit max_side
-#define N_COUNTERS 12
+// lfb_count / points_lfb counters (ulong): LFB_* of the prelude (paramlod.core.layouts.LFB_COUNTER)
 
 // The tiles a patch may touch, as an inclusive rectangle (x0, y0, x1, y1) of tile indices, or
 // false for none. The box holds the LOD stage's 89 samples only; between them the surface can
 // bulge out by about one LOD segment (at most max(s_u, s_v) / 7 px: s is 7 x the longest
 // segment), the widened range reaches widen * s further, and `margin` pixels cover the rest
-// (rounding, curvature). A sample that still lands outside is counted (C_MISS), never hidden.
+// (rounding, curvature). A sample that still lands outside is counted (LFB_BBOX_MISS_SAMPLES), never hidden.
 // An infinite pad means the patch touches the space behind the near plane: its projection is
 // unbounded, so it goes to every tile.
 inline bool tile_rect(float4 box, float4 ext, float margin, float widen, float W, float H,
@@ -73,14 +60,14 @@ __kernel void lfb_count(__global const RenderPatch* patches, uint n_patches, __g
     int4 r;
     if (!tile_rect(rp.bbox, rp.ext, margin, widen, cam[CAM_W], cam[CAM_H], tiles_x, tiles_y, &r)) {
         rects[pid] = (int4)(0, 0, -1, -1);
-        atom_add(&counters[C_UNPLACED], (ulong)1);
+        atom_add(&counters[LFB_UNPLACED_PATCHES], (ulong)1);
         return;
     }
     rects[pid] = r;
     for (int ty = r.y; ty <= r.w; ++ty)
         for (int tx = r.x; tx <= r.z; ++tx)
             atomic_inc(&tile_count[ty * tiles_x + tx]);
-    atom_add(&counters[C_PAIRS], (ulong)((r.z - r.x + 1) * (r.w - r.y + 1)));
+    atom_add(&counters[LFB_TILE_PATCH_PAIRS], (ulong)((r.z - r.x + 1) * (r.w - r.y + 1)));
 }
 
 // Each tile's list gets its patches in atomic order; the local framebuffer's atom_min and the
@@ -255,14 +242,14 @@ void points_lfb(__global const RenderPatch* patches, __global const int4* rects,
         n_pixels++;
         n_covered += cnt;
     }
-    atom_add(&counters[C_SAMPLES], n_samples);
-    atom_add(&counters[C_UNIQUE], n_unique);
-    atom_add(&counters[C_NAN], n_nan);
-    atom_add(&counters[C_MISS], n_miss);
-    atom_add(&counters[C_LOCAL], n_local);
-    atom_add(&counters[C_HITS], n_hits);
-    atom_add(&counters[C_ATOMICS], n_atomics);
-    atom_add(&counters[C_PIXELS], n_pixels);
-    atom_add(&counters[C_COVERED], n_covered);
-    atom_add(&counters[C_CAPPED], n_capped);
+    atom_add(&counters[LFB_SAMPLES], n_samples);
+    atom_add(&counters[LFB_SAMPLES_UNIQUE], n_unique);
+    atom_add(&counters[LFB_NAN_SAMPLES], n_nan);
+    atom_add(&counters[LFB_BBOX_MISS_SAMPLES], n_miss);
+    atom_add(&counters[LFB_LOCAL_ATOMICS], n_local);
+    atom_add(&counters[LFB_LOCAL_HITS], n_hits);
+    atom_add(&counters[LFB_ATOMICS], n_atomics);
+    atom_add(&counters[LFB_PIXELS_RESOLVED], n_pixels);
+    atom_add(&counters[LFB_COVERED_SUBSAMPLES], n_covered);
+    atom_add(&counters[LFB_CAPPED_PATCHES], n_capped);
 }

@@ -33,8 +33,8 @@ import numpy as np
 
 from paramlod.core import color, shading
 
-FLOAT, UINT = "float", "uint"
-_NUMPY = {FLOAT: "<f4", UINT: "<u4"}
+FLOAT, UINT, ULONG = "float", "uint", "ulong"   # ulong: flat records of 64-bit counters only
+_NUMPY = {FLOAT: "<f4", UINT: "<u4", ULONG: "<u8"}
 _CL_VEC = {2: "float2", 4: "float4"}
 _SCALAR = {FLOAT: "float", UINT: "uint"}
 _GLSL_VEC = {2: "vec2", 4: "vec4"}
@@ -89,7 +89,7 @@ class Record:
 
     @property
     def length(self) -> int:
-        """Elements (floats or uints) of a flat record."""
+        """Elements (floats, uints or ulongs) of a flat record."""
         return sum(f.count for f in self.fields)
 
     @property
@@ -100,7 +100,7 @@ class Record:
     def offset(self, field: str) -> int:
         """Element offset (flat record) or byte offset (struct record) of ``field``."""
         off = self.dtype.fields[field][1]
-        return off if self.struct else off // 4
+        return off if self.struct else off // np.dtype(_NUMPY[self.fields[0].type]).itemsize
 
     def slice(self, field: str) -> slice:
         """The elements of ``field`` in a flat record."""
@@ -251,7 +251,51 @@ GRID_VERTEX = Record(
         Field("inst", UINT, 1, "the instance"),
     ], struct="GridVertex")
 
-RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH, CLUSTER, GRID_VERTEX)
+
+
+# The render kernels' statistics counters (one ulong each, added with atom_add; the host zeroes
+# them before a frame and reads them after it)
+POINTS_COUNTER = Record(
+    "point counters", "points_direct and points_schedule (paramlod.renderers.points)", [
+        Field("samples", ULONG, 1, "samples evaluated"),
+        Field("atomics", ULONG, 1, "64-bit atom_min issued into the key buffer"),
+        Field("nan_samples", ULONG, 1, "samples whose position is NaN or infinite"),
+        Field("capped_patches", ULONG, 1, "patches whose grid hit PointSettings.max_side"),
+        Field("sched", ULONG, 1, "points_schedule: patches listed << CHUNK_BITS | units listed so far"),
+        Field("units", ULONG, 1, "the most units a list of the frame holds (the host checks MAX_UNITS)"),
+    ], prefix="PTS", size="PTS_COUNTERS")
+
+LFB_COUNTER = Record(
+    "points-ssaa counters", "lfb_count and points_lfb (paramlod.renderers.points_lfb)", [
+        Field("tile_patch_pairs", ULONG, 1, "(tile, patch) pairs"),
+        Field("unplaced_patches", ULONG, 1, "patches whose box touches no tile (no sample in front, or off screen)"),
+        Field("samples", ULONG, 1, "samples evaluated, every tile that lists the patch counted"),
+        Field("samples_unique", ULONG, 1, "samples of the grids, each patch counted once"),
+        Field("nan_samples", ULONG, 1, "NaN/inf samples, each patch counted once"),
+        Field("bbox_miss_samples", ULONG, 1, "drawable samples that fell in a tile the patch's box did not reach"),
+        Field("local_atomics", ULONG, 1, "local atom_min issued (after the early-depth read)"),
+        Field("local_hits", ULONG, 1, "samples that landed in the tile being rendered"),
+        Field("atomics", ULONG, 1, "global atom_min issued by the resolve (colour buffer)"),
+        Field("pixels_resolved", ULONG, 1, "pixels resolved (at least one covered subsample)"),
+        Field("covered_subsamples", ULONG, 1, "covered subsamples over all resolved pixels"),
+        Field("capped_patches", ULONG, 1, "patches that hit max_side"),
+    ], prefix="LFB", size="LFB_COUNTERS")
+
+RASTER_COUNTER = Record(
+    "mesh raster counters", "raster_clusters and raster_large (paramlod.meshlod.raster)", [
+        Field("triangles", ULONG, 1, "triangles of the selected clusters (times their views)"),
+        Field("near_clipped", ULONG, 1, "of them crossing the near plane"),
+        Field("culled", ULONG, 1, "of them drawing nothing: behind near, beyond far, not finite, degenerate, "
+              "off screen or between pixel centres"),
+        Field("large", ULONG, 1, "fan triangles sent to the large list (its length, may pass its capacity)"),
+        Field("large_overflow", ULONG, 1, "of them beyond the list's capacity (the host grows it and redraws)"),
+        Field("pixels", ULONG, 1, "pixels covered (inside a triangle, depth in [near, far])"),
+        Field("atomics", ULONG, 1, "colour atomics issued"),
+        Field("spare", ULONG),
+    ], prefix="RS", size="RS_COUNTERS")
+
+RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH, CLUSTER, GRID_VERTEX,
+           POINTS_COUNTER, LFB_COUNTER, RASTER_COUNTER)
 
 # Constants the host and the kernels share that belong to no record: work-group sizes the host
 # launches with and the kernels declare (reqd_work_group_size, __local arrays).

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from paramlod.core.layouts import CAMERA, CAMERA_FLOATS, CLUSTER, camera_record
+from paramlod.core.layouts import CAMERA, CAMERA_FLOATS, CLUSTER, RASTER_COUNTER, camera_record
 from paramlod.core.views import Views
 from paramlod.device.context import cl_device
 from paramlod.device.programs import build, launch
@@ -27,8 +27,8 @@ from paramlod.meshlod.cut import MASK_BYTES, DeviceRecords
 from paramlod.meshlod.raster_reference import GUARD_PIXELS, SUBPIXEL_BITS
 from paramlod.renderers.shading import LIGHT
 
-# the kernel's counters (kernels/meshlod/raster.cl RS_*), one ulong each, then one spare
-COUNTERS = ("triangles", "near_clipped", "culled", "large", "large_overflow", "pixels", "atomics")
+# the kernel's counters (RS_* of the prelude), one ulong each, then one spare
+COUNTERS = tuple(f.name for f in RASTER_COUNTER.fields if f.name != "spare")
 COLOR_BY = {"material": 0, "cluster": 1, "level": 2}
 LOCAL = CLUSTER.constant("CLUSTER_MAX_TRIANGLES")   # raster_clusters: one work-item per triangle
 LARGE_LOCAL = 64                                     # raster_large: work-items over one triangle's pixels
@@ -65,8 +65,8 @@ class MeshRaster:
         self.groups = int(groups) if groups else cu * (16 if dev.is_gpu else 8)
         self.large_groups = cu * (16 if dev.is_gpu else 4)
         ctx = dev.context
-        self.counters = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 8 * 8)
-        self._counts = np.zeros(8, np.uint64)
+        self.counters = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 8 * RASTER_COUNTER.length)
+        self._counts = np.zeros(RASTER_COUNTER.length, np.uint64)
         self.large = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 16 * self.large_capacity)
         self._cams, self._light = DeviceRecords(), DeviceRecords()   # written each frame, no wait
         self.events = ()
@@ -125,7 +125,7 @@ class MeshRaster:
                 raise MeshError(f"MeshRaster: the light record has 4 floats (towards the light, ambient), "
                                 f"got shape {light_host.shape}")
             light_buf = self._light.write(light_host)
-        cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * 8)
+        cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * RASTER_COUNTER.length)
         masks = selection if n_views == 1 else masks   # one view: not read
         geometry = (dev.vertices, dev.normals, dev.triangles, dev.clusters, dev.inst_f, dev.inst_u, dev.materials,
                     dev.weights)
@@ -152,7 +152,7 @@ class MeshRaster:
     def grow(self) -> bool:
         """After the frame's wait (and ``collect``): True if the large list overflowed; it has
         grown to hold this frame's large triangles with room to spare, so draw the frame again."""
-        need = int(self._counts[COUNTERS.index("large")])
+        need = int(self._counts[RASTER_COUNTER.offset("large")])
         if need <= self.large_capacity:
             return False
         self.large_capacity = 1 << int(np.ceil(np.log2(need * 1.25)))

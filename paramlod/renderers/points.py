@@ -11,6 +11,7 @@ import pyopencl as cl
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
+from paramlod.core.layouts import POINTS_COUNTER
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import POINT_TIERS, tier_divisors
 from paramlod.renderers.occlusion import OcclusionCuller, occlusion_cl_defines
@@ -21,8 +22,10 @@ from paramlod.renderers.shading import LIGHT
 from paramlod.device.programs import launch
 from paramlod.function.programs import POLY_TRIG, VECTOR, build, sample_run
 
+# the statistics of POINTS_COUNTER (points.cl PTS_*); its last two words are the schedule's
 COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
-COUNTER_WORDS = len(COUNTERS) + 2   # and points.cl SCHED_AT, UNITS_AT
+COUNTER_WORDS = POINTS_COUNTER.length
+SCHED_WORD, UNITS_WORD = POINTS_COUNTER.offset("sched"), POINTS_COUNTER.offset("units")
 # points.cl order[]: a patch's first unit in 32 bits (and a work-item's unit may pass the last by
 # POINTS_LOCAL); points_direct draws nothing of a list past it
 MAX_UNITS = 0xFFFFFFFF - POINTS_LOCAL
@@ -121,7 +124,7 @@ class DirectPointRenderer:
         self._launches: dict = {}
         self.record = record
         dev = cl_device()
-        # COUNTERS, then the schedule's counter and the largest list's units (points.cl SCHED_AT, UNITS_AT)
+        # COUNTERS, then the schedule's counter and the largest list's units (PTS_SCHED, PTS_UNITS)
         self.counters = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, 8 * COUNTER_WORDS)
         self._count = cl.Buffer(dev.context, cl.mem_flags.READ_ONLY, 4)   # a host-given patch count
         self._counts = np.zeros(COUNTER_WORDS, np.uint64)
@@ -183,7 +186,7 @@ class DirectPointRenderer:
         if phase == 0:
             cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 0, 8 * COUNTER_WORDS)
         else:   # only the schedule's counter
-            cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * len(COUNTERS), 8)
+            cl.enqueue_fill_buffer(q, self.counters, np.uint64(0), 8 * SCHED_WORD, 8)
         sampling = (settings.factor(scale), settings.curve_factor(scale),
                     settings.measure(boundary=True))   # watertight on patch edges
         args = (patches_buf, self._order,
@@ -222,12 +225,12 @@ class DirectPointRenderer:
         """The last render's counters (COUNTERS); ``wait``: read them now (waits for the render)."""
         if wait:
             cl.enqueue_copy(cl_device().queue, self._counts, self.counters)
-        units = int(self._counts[-1])   # UNITS_AT: the largest list's
+        units = int(self._counts[UNITS_WORD])   # the largest list's
         if units > MAX_UNITS:
             raise CapacityError(f"points: a frame of {units:,} sample runs, more than the schedule numbers "
                                 f"({MAX_UNITS:,}); draw at a smaller size or supersampling, or with fewer samples "
                                 f"(PointSettings.density)")
-        return {k: int(v) for k, v in zip(COUNTERS, self._counts)}
+        return {k: int(self._counts[POINTS_COUNTER.offset(k)]) for k in COUNTERS}
 
     def draw(self, patches_buf, n_patches, inst, materials_buf, cam_buf, light_buf, keys,
              settings: PointSettings, record_args=(), n_views: int = 1):

@@ -21,6 +21,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 from pyopencl.scan import ExclusiveScanKernel
 
+from paramlod.core.layouts import LFB_COUNTER
 from paramlod.core.transforms import in_range
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError, DeviceError, SceneError
@@ -33,10 +34,8 @@ from paramlod.renderers.sampling import PointSettings, points_cl_defines
 from paramlod.renderers.shading import LIGHT
 from paramlod.renderers.targets import srgb_device_tables
 
-# kernels/points_lfb.cl C_* counters, same order
-LFB_COUNTERS = ("tile_patch_pairs", "unplaced_patches", "samples", "samples_unique", "nan_samples",
-                "bbox_miss_samples", "local_atomics", "local_hits", "atomics", "pixels_resolved",
-                "covered_subsamples", "capped_patches")
+# the counters of points_lfb.cl (LFB_* of the prelude), in order
+LFB_COUNTERS = tuple(f.name for f in LFB_COUNTER.fields)
 TILE = 16
 
 

@@ -60,6 +60,15 @@ def test_host_names_derive_from_the_declarations():
     assert layouts.CAMERA_FLOATS == CAMERA.length == 36
     assert (stage.LOD_COUNTERS, stage.LOD_RENDER_TOTAL, stage.LOD_LOCAL) == (10, 1, 32)
     assert [stage.C_CHILDREN, stage.C_SPLIT, stage.C_CULLED, stage.C_RENDERED, stage.C_FORCED] == [0, 1, 2, 3, 4]
+    # the render kernels' counters: what the host reads by name is the record's (PTS_*, LFB_*, RS_*)
+    from paramlod.meshlod import raster
+    from paramlod.renderers import points, points_lfb
+
+    assert [layouts.POINTS_COUNTER.offset(k) for k in points.COUNTERS] == [0, 1, 2, 3]
+    assert (points.SCHED_WORD, points.UNITS_WORD, points.COUNTER_WORDS) == (4, 5, 6)
+    assert points_lfb.LFB_COUNTERS[0] == "tile_patch_pairs" and len(points_lfb.LFB_COUNTERS) == 12
+    assert raster.COUNTERS[-1] == "atomics" and layouts.RASTER_COUNTER.length == 8
+    assert layouts.RASTER_COUNTER.size == 8 * layouts.RASTER_COUNTER.length   # ulong words
     # the light record is what the renderers upload, and GLSL reads it as vec4 u_light (xyz, w)
     assert shading.LIGHT.shape == (LIGHT.length,) and LIGHT.slice("towards") == slice(0, 3)
     assert LIGHT.offset("ambient") == 3 and shading.LIGHT[3] == np.float32(shading.AMBIENT)
