@@ -27,6 +27,7 @@ import pyopencl as cl
 from paramlod.core.camera import Camera, pixel_world_size, sphere_depth, transform_scale  # noqa: F401
 from paramlod.core.color import srgb_to_linear
 from paramlod.core.frame import FrameStats
+from paramlod.core.layouts import SURFEL_COUNTER, SURFEL_VIEW
 from paramlod.core.views import Views, as_views
 from paramlod.device.context import cl_device
 from paramlod.device.programs import kernel
@@ -43,8 +44,8 @@ LOCAL = 64
 # IEEE float division and sqrt, as numpy does: the splat kernel's coverage and depth keys must match
 # its numpy twin bit for bit, and NVIDIA's default division is not correctly rounded
 EXACT_DIVISION = ("-cl-fp32-correctly-rounded-divide-sqrt",)
-COUNTERS = ("surfels_drawn", "atomics", "pixels_covered", "surfels_not_finite")   # per view
-VIEW_FLOATS = 42   # the splat's draw record per view (kernels/surfels/surfels_splat.cl SF_VIEW_FLOATS)
+COUNTERS = tuple(f.name for f in SURFEL_COUNTER.fields)   # per view
+VIEW_FLOATS = SURFEL_VIEW.length   # the splat's draw record per view
 
 
 @dataclass
@@ -194,8 +195,8 @@ def view_records(views: Views, transform, radii, mesh_weights) -> np.ndarray:
     the mesh weight (1: the view draws none of the object)."""
     out = np.zeros((len(views), VIEW_FLOATS), np.float32)
     for v, camera in enumerate(views):
-        out[v, :24], out[v, 24:40] = draw_records(camera, transform)
-    out[:, 40], out[:, 41] = radii, mesh_weights
+        out[v, SURFEL_VIEW.slice("xf")], out[v, SURFEL_VIEW.slice("inv_proj")] = draw_records(camera, transform)
+    out[:, SURFEL_VIEW.offset("radius")], out[:, SURFEL_VIEW.offset("mesh_weight")] = radii, mesh_weights
     return out.reshape(-1)
 
 
@@ -216,7 +217,7 @@ class _Splat:
         """The lead view's law, the counters of all views together."""
         ms = (self.event.profile.end - self.event.profile.start) * 1e-6
         total = self._per_view().sum(axis=0, dtype=np.uint64)
-        return {**self.choices[self.lead], "radius_view": float(self.records[self.lead, 40]),
+        return {**self.choices[self.lead], "radius_view": float(self.records[self.lead, SURFEL_VIEW.offset("radius")]),
                 "surfels": self.n_surfels, "ms": ms, **{k: int(v) for k, v in zip(COUNTERS, total)},
                 "views_drawn": int(sum(self.drawn))}
 
@@ -225,7 +226,7 @@ class _Splat:
         splatted into it (0 when it draws none of the object) and its counters."""
         ch = self.choices[v]
         return {**ch, "prefix": self.n if self.drawn[v] else 0, "view_prefix": ch["prefix"], "drawn": self.drawn[v],
-                "radius_view": float(self.records[v, 40]), "surfels": self.n_surfels,
+                "radius_view": float(self.records[v, SURFEL_VIEW.offset("radius")]), "surfels": self.n_surfels,
                 **{k: int(c) for k, c in zip(COUNTERS, self._per_view()[v])}}
 
 

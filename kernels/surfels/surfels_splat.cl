@@ -10,15 +10,9 @@
 #pragma OPENCL FP_CONTRACT OFF
 #include "common/rows.cl"
 
-// The per-view draw record (paramlod/surfels/render.py view_records, VIEW_FLOATS): the object's
-// model-view rows (12 floats) and normal-matrix rows (12: inverse transpose), the inverse
-// projection (16, rows), the disc radius in view units, the mesh weight.
-#define SF_VIEW_FLOATS 42
-#define SFV_XF 0
-#define SFV_INV_PROJ 24
-#define SFV_RADIUS 40
-#define SFV_MESH_WEIGHT 41
-#define SF_COUNTERS 4   // per view: surfels drawn, colour atomics, pixels covered, not finite
+// The per-view draw record (SF_VIEW_FLOATS: SFV_XF, SFV_INV_PROJ, SFV_RADIUS, SFV_MESH_WEIGHT) and the
+// per-view counters (SF_COUNTERS: SF_SURFELS_DRAWN, ...) are records of the prelude
+// (paramlod.core.layouts SURFEL_VIEW, SURFEL_COUNTER).
 
 inline float sf_dot(float3 a, float3 b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
 
@@ -55,7 +49,7 @@ inline void sf_splat_view(float3 p, float3 n_obj, float4 mat, __global const flo
     float3 nv = rows_dir(rec + SFV_XF + 12, n_obj);
     float r2 = radius * radius;
 
-    if (is_bad3(e) || is_bad3(nv) || !(radius > 0.0f)) { atom_add(&counters[3], (ulong)1); return; }
+    if (is_bad3(e) || is_bad3(nv) || !(radius > 0.0f)) { atom_add(&counters[SF_SURFELS_NOT_FINITE], (ulong)1); return; }
     if (-e.z - radius > far || -e.z + radius < near) return;   // wholly beyond far or before near
 
     // conservative screen box: the 8 corners of the cube around the disc's bounding sphere, with
@@ -103,9 +97,9 @@ inline void sf_splat_view(float3 p, float3 n_obj, float4 mat, __global const flo
             issued += write_point(color_buf, aux_buf, pix, color_key(depth, rgba), aux_key(depth, n_world, object_id));
         }
     }
-    atom_add(&counters[0], (ulong)1);
-    atom_add(&counters[1], issued);
-    atom_add(&counters[2], covered);
+    atom_add(&counters[SF_SURFELS_DRAWN], (ulong)1);
+    atom_add(&counters[SF_ATOMICS], issued);
+    atom_add(&counters[SF_PIXELS_COVERED], covered);
 }
 
 // views: n_views draw records of SF_VIEW_FLOATS; cam: n_views camera records; counters:

@@ -294,8 +294,23 @@ RASTER_COUNTER = Record(
         Field("spare", ULONG),
     ], prefix="RS", size="RS_COUNTERS")
 
+SURFEL_VIEW = Record(
+    "surfel view", "per view of a surfel splat (paramlod.surfels.render.view_records)", [
+        Field("xf", FLOAT, 24, "the object's model-view rows (12), then its normal-matrix rows (12: inverse transpose)"),
+        Field("inv_proj", FLOAT, 16, "the inverse projection, rows"),
+        Field("radius", FLOAT, 1, "the disc radius in view units"),
+        Field("mesh_weight", FLOAT, 1, "the hand-off weight of the object's mesh (1: the view draws no surfel)"),
+    ], prefix="SFV", size="SF_VIEW_FLOATS")
+
+SURFEL_COUNTER = Record(
+    "surfel counters", "per view of a surfel splat (paramlod.surfels.render)", [
+        Field("surfels_drawn", ULONG), Field("atomics", ULONG, 1, "colour atomics issued"),
+        Field("pixels_covered", ULONG),
+        Field("surfels_not_finite", ULONG, 1, "a position, normal or radius not finite (or a radius <= 0)"),
+    ], prefix="SF", size="SF_COUNTERS")
+
 RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH, CLUSTER, GRID_VERTEX,
-           POINTS_COUNTER, LFB_COUNTER, RASTER_COUNTER)
+           POINTS_COUNTER, LFB_COUNTER, RASTER_COUNTER, SURFEL_VIEW, SURFEL_COUNTER)
 
 # Constants the host and the kernels share that belong to no record: work-group sizes the host
 # launches with and the kernels declare (reqd_work_group_size, __local arrays).
