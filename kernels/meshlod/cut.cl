@@ -10,9 +10,9 @@
 // kernels/common/common.cl (64-bit atomics).
 //
 // Output: (instance, cluster) uint2 pairs appended to `selection` (written only below
-// `capacity`; with several views their masks to `masks`), and 8 ulong counters: [0] selected
-// (may exceed capacity), [1] their triangles, [2] culled by the frustum, [3] culled by the
-// backface cone, [4] cluster tests made (then, with several views, two per view).
+// `capacity`; with several views their masks to `masks`), and the CUT_COUNTERS ulong counters:
+// CUT_SELECTED (may exceed capacity), CUT_TRIANGLES, CUT_CULLED_FRUSTUM, CUT_CULLED_BACKFACE,
+// CUT_TESTS (then, with several views, two per view).
 // Each work-group sums its counts in local memory and reserves its range of the selection with
 // one global atomic, so the counters see one atomic per group and counter, not per cluster.
 // An instance whose hand-off weight (`weights`, paramlod/scene/handoff.py) is 0 selects nothing and

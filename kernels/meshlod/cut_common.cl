@@ -1,8 +1,8 @@
 // What the two mesh cut kernels share: kernels/meshlod/cut.cl (the DAG cut, twin
 // paramlod/meshlod/cut_reference.py) and kernels/meshlod/skin_cull.cl (skinned meshlets, twin
 // paramlod/meshlod/skin_cull_reference.py). Included after `#pragma OPENCL FP_CONTRACT OFF`;
-// needs CC_PLANES (the cut camera record), CUT_VIEW_COUNTERS (where the per-view counters start)
-// and the 64-bit atomics of kernels/common/common.cl.
+// needs CC_PLANES (the cut camera record) and the 64-bit atomics of kernels/common/common.cl; the
+// counters are CUT_* of the prelude (paramlod.core.layouts.CUT_COUNTER).
 //
 // Views: a kernel gets the first view's cut camera record by value (all a one-view cut reads) and
 // the records of a frame's N views one after another in a buffer (N * CC_FLOATS floats,
@@ -10,7 +10,7 @@
 // memory (cut_view) so the tests read every view's record as the one-view cut reads its own. With
 // N > 1 each selected pair also gets a view mask (bit v: the views it is drawn into, `masks`,
 // parallel to the selection) and per-view counters follow the eight of the contract:
-// [CUT_VIEW_COUNTERS + 2v] the pairs drawn into view v, [CUT_VIEW_COUNTERS + 2v + 1] their
+// [CUT_COUNTERS + 2v] the pairs drawn into view v, [CUT_COUNTERS + 2v + 1] their
 // triangles. With N == 1 neither is written.
 #ifndef PL_MESHLOD_CUT_COMMON
 #define PL_MESHLOD_CUT_COMMON
@@ -77,14 +77,15 @@ inline void cut_group_append(volatile __local uint* l_n, volatile __local ulong*
                              uint local_size) {
     barrier(CLK_LOCAL_MEM_FENCE);
     if (get_local_id(0) == 0) {
-        *l_base = l_n[0] ? atom_add(&counters[0], (ulong)l_n[0]) : 0;
-        for (int i = 1; i < 4; ++i)
-            if (l_n[i]) atom_add(&counters[i], (ulong)l_n[i]);
-        if (tests) atom_add(&counters[4], (ulong)tests);
+        *l_base = l_n[0] ? atom_add(&counters[CUT_SELECTED], (ulong)l_n[0]) : 0;
+        if (l_n[1]) atom_add(&counters[CUT_TRIANGLES], (ulong)l_n[1]);
+        if (l_n[2]) atom_add(&counters[CUT_CULLED_FRUSTUM], (ulong)l_n[2]);
+        if (l_n[3]) atom_add(&counters[CUT_CULLED_BACKFACE], (ulong)l_n[3]);
+        if (tests) atom_add(&counters[CUT_TESTS], (ulong)tests);
     }
     if (CUT_VIEWS(n_views) > 1u)
         for (uint i = get_local_id(0); i < 2u * n_views; i += local_size)
-            if (l_v[i]) atom_add(&counters[CUT_VIEW_COUNTERS + i], (ulong)l_v[i]);
+            if (l_v[i]) atom_add(&counters[CUT_COUNTERS + i], (ulong)l_v[i]);
     barrier(CLK_LOCAL_MEM_FENCE);
     if (slot != 0xFFFFFFFFu) {
         ulong k = *l_base + slot;

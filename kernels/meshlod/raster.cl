@@ -240,7 +240,7 @@ void raster_clusters(__global const float4* vertices, __global const float4* nor
                      __global uint4* large, uint large_capacity, __global ulong* counters)
 {
     uint lid = get_local_id(0);
-    ulong n_sel = min(cut_counters[0], (ulong)capacity);
+    ulong n_sel = min(cut_counters[CUT_SELECTED], (ulong)capacity);
     ulong tris = 0, clipped = 0, culled = 0, covered = 0, issued = 0;
     uint layer_keys = (uint)cams[CAM_W] * (uint)cams[CAM_H];
     for (ulong s = get_group_id(0); s < n_sel; s += get_num_groups(0)) {

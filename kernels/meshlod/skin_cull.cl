@@ -8,8 +8,8 @@
 // Built after the prelude (INST_*) and kernels/common/common.cl (64-bit atomics).
 //
 // Output: like kernels/meshlod/cut.cl (the raster draws it unchanged): (instance, cluster) uint2 pairs
-// appended to `selection` (written only below `capacity`), and the counters [0] selected, [1] their
-// triangles, [2] culled by the frustum, [3] culled by the backface cone, [4] meshlet tests made,
+// appended to `selection` (written only below `capacity`), and the counters CUT_SELECTED,
+// CUT_TRIANGLES, CUT_CULLED_FRUSTUM, CUT_CULLED_BACKFACE and CUT_TESTS (meshlet tests made),
 // summed per work-group in local memory (one global atomic per group and counter). An instance whose
 // hand-off weight is 0 selects nothing and makes no tests.
 // Views (`cams`: n_views cut camera records, kernels/meshlod/cut_common.cl; `cam`: view 0's by

@@ -108,7 +108,7 @@ __kernel void voronoi_splat(__global const float4* pos, uint W, uint H, uint K,
 }
 
 // Each cell's farthest pixel (ties: the larger pixel index) becomes its site's candidate.
-// counters[0] counts covered pixels no site reached (must stay 0).
+// counters[SMP_UNREACHED] counts covered pixels no site reached (must stay 0).
 __kernel void farthest(__global const float4* pos, __global const ulong* vor, uint n_pix,
                        __global ulong* cand, __global uint* counters)
 {
@@ -116,7 +116,7 @@ __kernel void farthest(__global const float4* pos, __global const ulong* vor, ui
     if (q >= n_pix) return;
     ulong v = vor[q];
     if (v == ALL_ONES) {
-        if (pos[q].w > 0.0f) atomic_inc(&counters[0]);
+        if (pos[q].w > 0.0f) atomic_inc(&counters[SMP_UNREACHED]);
         return;
     }
     uint s = (uint)v;
@@ -163,7 +163,7 @@ __kernel void conflict_splat(__global const float4* pos, uint W, uint H, uint K,
 }
 
 // A candidate survives when it owns its own pixel; out[s] = its key, or 0.
-// counters[1] counts the candidates that passed the radius threshold.
+// counters[SMP_ELIGIBLE] counts the candidates that passed the radius threshold.
 __kernel void survive(__global const ulong* cand, uint n, float thr2, __global const ulong* conf,
                       __global ulong* out, __global uint* counters)
 {
@@ -172,6 +172,6 @@ __kernel void survive(__global const ulong* cand, uint n, float thr2, __global c
     ulong key = cand[s];
     float r2 = as_float((uint)(key >> 32));
     bool eligible = r2 >= thr2 && r2 > 0.0f;
-    if (eligible) atomic_inc(&counters[1]);
+    if (eligible) atomic_inc(&counters[SMP_ELIGIBLE]);
     out[s] = (eligible && conf[(uint)key] == key) ? key : 0ul;
 }

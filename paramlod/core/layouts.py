@@ -294,6 +294,22 @@ RASTER_COUNTER = Record(
         Field("spare", ULONG),
     ], prefix="RS", size="RS_COUNTERS")
 
+CUT_COUNTER = Record(
+    "mesh cut counters", "the DAG cut and the skinned meshlets' cull (paramlod.meshlod.cut, skin_cull; "
+    "twin paramlod.meshlod.cut_reference); a multi-view cut's per-view counters follow (CUT_COUNTERS + 2v)", [
+        Field("selected", ULONG, 1, "(instance, cluster) pairs selected (the selection's length, may pass its capacity)"),
+        Field("triangles", ULONG, 1, "their triangles"),
+        Field("culled_frustum", ULONG), Field("culled_backface", ULONG),
+        Field("tests", ULONG, 1, "clusters tested"),
+        Field("spare", ULONG, 3),
+    ], prefix="CUT", size="CUT_COUNTERS")
+
+SAMPLER_COUNTER = Record(
+    "surfel sampler counters", "farthest and survive (paramlod.surfels.build.sampler)", [
+        Field("unreached", UINT, 1, "covered pixels no site reached (must stay 0)"),
+        Field("eligible", UINT, 1, "candidates that passed the radius threshold"),
+    ], prefix="SMP", size="SMP_COUNTERS")
+
 SURFEL_VIEW = Record(
     "surfel view", "per view of a surfel splat (paramlod.surfels.render.view_records)", [
         Field("xf", FLOAT, 24, "the object's model-view rows (12), then its normal-matrix rows (12: inverse transpose)"),
@@ -310,7 +326,8 @@ SURFEL_COUNTER = Record(
     ], prefix="SF", size="SF_COUNTERS")
 
 RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH, CLUSTER, GRID_VERTEX,
-           POINTS_COUNTER, LFB_COUNTER, RASTER_COUNTER, SURFEL_VIEW, SURFEL_COUNTER)
+           POINTS_COUNTER, LFB_COUNTER, RASTER_COUNTER, CUT_COUNTER, SAMPLER_COUNTER, SURFEL_VIEW,
+           SURFEL_COUNTER)
 
 # Constants the host and the kernels share that belong to no record: work-group sizes the host
 # launches with and the kernels declare (reqd_work_group_size, __local arrays).

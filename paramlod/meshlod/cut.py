@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from paramlod.core.layouts import CUT_COUNTER
 from paramlod.core.views import MAX_VIEWS, as_views
 from paramlod.device.context import cl_device
 from paramlod.device.programs import events_ms, kernel, launch
@@ -28,13 +29,13 @@ from paramlod.meshlod import cut_reference as ref
 from paramlod.meshlod.buffers import ONE_SIDED, SIMILAR, DeviceMeshes
 
 CUT_LOCAL = 64          # work-items per group: one local reduction and one global atomic per counter
-N_COUNTERS = 8          # ulong counters of the contract (the rest of COUNTERS' slots are spare)
+N_COUNTERS = CUT_COUNTER.length   # ulong counters of the contract (past COUNTERS, spare)
 PAIR_BYTES = 8          # one uint2 (instance, cluster)
 MASK_BYTES = 8          # one ulong view mask per pair (multi-view cuts)
 FRUSTUM, BACKFACE = 1, 2
 EXACT = ("-cl-fp32-correctly-rounded-divide-sqrt",)   # so the numpy twin's division and sqrt match
 # what both cut kernels (cut.cl, skin_cull.cl) read of the cut camera records and the counters
-COMMON_DEFINES = {"CC_PLANES": ref.CC_PLANES, "CC_FLOATS": ref.CC_FLOATS, "CUT_VIEW_COUNTERS": N_COUNTERS,
+COMMON_DEFINES = {"CC_PLANES": ref.CC_PLANES, "CC_FLOATS": ref.CC_FLOATS,
                   "CUT_MAX_VIEWS": MAX_VIEWS}
 _DEFINES = {**COMMON_DEFINES, "CUT_LOCAL": CUT_LOCAL, "CUT_CONES": f"{SIMILAR | ONE_SIDED}u", "CC_DEPTH": ref.CC_DEPTH,
             "CC_EYE": ref.CC_EYE, "CC_K": ref.CC_K, "CC_WA": ref.CC_WA, "CC_WB": ref.CC_WB,
@@ -126,7 +127,7 @@ class Selection:
     def grow(self, needed: int | None = None) -> bool:
         """Make room for ``needed`` pairs (default: the count last collected); True when the buffer
         grew, so the cut must be enqueued again (its pairs are gone)."""
-        need = int(self._raw[0]) if needed is None else int(needed)
+        need = int(self._raw[CUT_COUNTER.offset("selected")]) if needed is None else int(needed)
         if need <= self.capacity:
             return False
         self._alloc(max(need + need // 4, 2 * self.capacity))

@@ -38,13 +38,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from paramlod.core.layouts import INSTANCE_F, INSTANCE_U
+from paramlod.core.layouts import CUT_COUNTER, INSTANCE_F, INSTANCE_U
 from paramlod.core.transforms import is_number
 from paramlod.core.views import as_views
 from paramlod.errors import MeshError
 
 # the counters (8 ulong on the device; the rest are spare zeros)
-COUNTERS = ("selected", "triangles", "culled_frustum", "culled_backface", "tests")
+COUNTERS = tuple(f.name for f in CUT_COUNTER.fields if f.name != "spare")
 VIEW_COUNTERS = ("clusters", "triangles")   # per view of a multi-view cut, after the 8
 SIMILAR, ONE_SIDED = 1, 4   # MeshInstances flags (paramlod.meshlod.buffers; checked equal in the tests)
 

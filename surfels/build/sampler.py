@@ -29,6 +29,7 @@ import numpy as np
 
 from paramlod.app.scenefile import load_scene
 from paramlod.core.color import linear_rgba_to_srgb8_f64
+from paramlod.core.layouts import SAMPLER_COUNTER
 from paramlod.device.context import cl_device
 from paramlod.device.programs import build
 from paramlod.errors import SurfelError
@@ -140,7 +141,7 @@ class Sampler:
         self.conf = cla.empty(q, self.n_pix, np.uint64)
         self.samples = cla.zeros(q, target, np.uint64)
         self.cand = cla.zeros(q, target, np.uint64)
-        self.counters = cla.zeros(q, 4, np.uint32)
+        self.counters = cla.zeros(q, SAMPLER_COUNTER.length, np.uint32)
         self.maxbuf = cla.zeros(q, 1, np.uint64)
         self.n = 0
         self.rounds: list[RoundStats] = []
@@ -181,7 +182,7 @@ class Sampler:
                            np.uint32(self.n_pix), self.cand.data, self.counters.data)
         self.maxbuf.fill(np.uint64(0))
         self.k["max_key"](self.q, (_round_up(n, LOCAL),), (LOCAL,), self.cand.data, np.uint32(n), self.maxbuf.data)
-        return np.uint64(self.maxbuf.get()[0]), int(self.counters.get()[0])
+        return np.uint64(self.maxbuf.get()[0]), int(self.counters.get()[SAMPLER_COUNTER.offset("unreached")])
 
     def conflicts(self, thr2, r2max):
         n = self.n
@@ -260,7 +261,7 @@ class Sampler:
             first = self.append(keys, take)
             self.splat_voronoi(first, take, splat_r2(r2max))
             self.q.finish()
-            self.rounds.append(RoundStats(len(self.rounds) + 1, first, int(self.counters.get()[1]), m, take,
+            self.rounds.append(RoundStats(len(self.rounds) + 1, first, int(self.counters.get()[SAMPLER_COUNTER.offset("eligible")]), m, take,
                                           float(np.sqrt(r2max)), (time.perf_counter() - t0) * 1e3))
             if progress is not None:
                 progress(self.n, float(np.sqrt(r2max)))
