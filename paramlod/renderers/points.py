@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from paramlod.core.layouts import POINTS_COUNTER
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
-from paramlod.core.layouts import POINTS_COUNTER
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import POINT_TIERS, tier_divisors
 from paramlod.renderers.occlusion import OcclusionCuller, occlusion_cl_defines
