@@ -372,8 +372,7 @@ class _Cluster:
         return f"{len(self.envs)} local {'GPU ' if w.gpus else ''}worker(s)"
 
     def __enter__(self):
-        need_dask("--workers, --gpus and --scheduler")
-        import dask
+        import dask   # run_job and bench_scaling have checked that it is installed (need_dask)
         from distributed import Client, Nanny, Scheduler, SpecCluster
         w = self.where
         # a worker that died while running a task counts as one failure of that task

@@ -384,12 +384,14 @@ class ParametricFunction:
 
     def evaluate(self, u, v, block: np.ndarray | None = None, **params) -> np.ndarray:
         """Positions f(u, v) with shape broadcast(u, v) + (3,), float64."""
+        arrays = []   # converted once here; _call and _reference take float64 arrays as they are
         for name, x in (("u", u), ("v", v)):
             try:
-                np.asarray(x, dtype=np.float64)
+                arrays.append(np.asarray(x, dtype=np.float64))
             except (TypeError, ValueError):
                 raise FunctionError(f"evaluate '{self.name}': {name} must be numbers (a number or an array), "
                                     f"got {x!r}"[:300]) from None
+        u, v = arrays
         if block is None:
             block = self.param_block(params)
         if self.is_snippet:

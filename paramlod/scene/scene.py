@@ -128,10 +128,21 @@ def _check_placed(m, transforms, who: str) -> None:
         check_values(m @ transforms, f"{who}: transform @ transforms")
 
 
-def _mesh_model(who: str, material, transform) -> np.ndarray:
-    """A mesh object's model matrix, its material checked; ``who`` names the object in messages."""
+def _check_material(who: str, material) -> None:
     if material is not None and not isinstance(material, Material):
         raise SceneError(f"{who}: material must be a paramlod.Material, got {type(material).__name__}")
+
+
+def _check_count(who: str, count) -> int:
+    """An object's instance count as an int; ``who`` names the object in messages."""
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise SceneError(f"{who}: instance count must be an integer of at least 1, got {count!r}")
+    return int(count)
+
+
+def _mesh_model(who: str, material, transform) -> np.ndarray:
+    """A mesh object's model matrix, its material checked; ``who`` names the object in messages."""
+    _check_material(who, material)
     try:
         return np.eye(4) if transform is None else _as_matrix(transform)
     except SceneError as exc:
@@ -226,11 +237,8 @@ class Scene:
         _check_names(variant, aa)
         fn = get_function(fn_or_name)
         self._check_room("use add_instances for many copies of one function")
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-            raise SceneError(f"'{fn.name}': instance count must be an integer of at least 1, got {count!r}")
-        count = int(count)
-        if material is not None and not isinstance(material, Material):
-            raise SceneError(f"'{fn.name}': material must be a paramlod.Material, got {type(material).__name__}")
+        count = _check_count(f"'{fn.name}'", count)
+        _check_material(f"'{fn.name}'", material)
         params = dict(params or {})
         for name, val in params.items():
             try:
@@ -297,9 +305,7 @@ class Scene:
         self._check_room("use add_mesh_instances for many copies of one mesh")
         if lod not in MESH_LODS:
             raise SceneError(f"mesh '{label}': lod must be one of {', '.join(map(repr, MESH_LODS))}, got {lod!r}")
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-            raise SceneError(f"mesh '{label}': instance count must be an integer of at least 1, got {count!r}")
-        count = int(count)
+        count = _check_count(f"mesh '{label}'", count)
         m = _mesh_model(f"mesh '{label}'", material, transform)
         if transforms is not None:
             try:

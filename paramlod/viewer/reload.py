@@ -70,13 +70,12 @@ class Source:
         self.spec, self.size, self.variant, self.aa = str(spec), size, variant, aa
         check_variant(variant)   # at start, as `paramlod render --variant` refuses it
         path = Path(self.spec)
-        suffix = path.suffix.lower()
+        suffix, alone = path.suffix.lower(), file_object_kind(path)
         # a mesh or surfel file loads as a scene of that one object (paramlod.app.scenefile)
-        self.kind = ("scene" if suffix == ".toml" or file_object_kind(path) else "plugin" if suffix == ".py"
-                     else "function")
+        self.kind = "scene" if suffix == ".toml" or alone else "plugin" if suffix == ".py" else "function"
         if self.kind != "function" and not path.is_file():
             what = ("plugin file" if self.kind == "plugin" else
-                    {"mesh": "mesh file", "surfels": "surfel file"}.get(file_object_kind(path), "scene file"))
+                    {"mesh": "mesh file", "surfels": "surfel file"}.get(alone, "scene file"))
             raise ParamlodError(f"{what} {path} does not exist" if not path.exists() else f"{what} {path} is not a file")
         self.path = path.resolve() if self.kind != "function" else None
         self.function_index = 0

@@ -2,6 +2,7 @@
 import json
 
 from paramlod.app.cli import main
+from paramlod.device.context import cl_device
 
 
 def test_bench_writes_json_markdown_and_per_distance_rows(tmp_path):
@@ -91,8 +92,6 @@ def test_bench_on_a_cpu_takes_the_cpu_defaults_and_says_so(tmp_path, capsys):
     """Without --size, --distances, --frames and --warmup a CPU device runs 640x360 at the framing
     distance, 3 frames after 1 (the GPU's 1080p orbit at four distances is hours of frames there);
     what is given stays as given."""
-    from paramlod.device.context import cl_device
-
     assert not cl_device().is_gpu   # the test machines' PoCL
     assert main(["bench", "sphere", "--variants", "points", "--extras", "--out", str(tmp_path / "a")]) == 0
     res = json.loads((tmp_path / "a" / "results.json").read_text())

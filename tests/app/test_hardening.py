@@ -2,6 +2,7 @@
 naming the argument (exit 2, no traceback, no file), every output is checked before any work and a
 command writes all its outputs or none; ``paramlod functions`` shows docstrings, ``render --time``,
 progress for long steps."""
+import dataclasses
 import io
 import json
 import os
@@ -13,9 +14,10 @@ import numpy as np
 import pytest
 
 import paramlod as pl
+from paramlod import views
 from paramlod.app import args as cli_args
-from paramlod.app import cli
-from paramlod.app.bench import run as bench
+from paramlod.app import cli, dist
+from paramlod.app.bench import peers, run as bench
 from paramlod.app.scenefile import TRUST_ENV, load_scene
 from paramlod.function import registry
 
@@ -297,8 +299,6 @@ def test_bench_extras_without_their_modules(work, capsys, monkeypatch):
 def test_cluster_work_without_dask_says_so_before_any_frame(work, capsys, monkeypatch):
     """Without Dask, --workers and bench-scale fail with one line naming the extra to install,
     before a frame is drawn or a progress bar drawn (bench-scale said it with a traceback)."""
-    from paramlod.app import dist
-
     real = dist.importlib.util.find_spec
     monkeypatch.setattr(dist.importlib.util, "find_spec", lambda m, *a: None if m == "distributed" else real(m, *a))
     monkeypatch.setattr(dist, "render_frame", lambda *a, **k: pytest.fail("rendered before checking for Dask"))
@@ -312,9 +312,6 @@ def test_cluster_work_without_dask_says_so_before_any_frame(work, capsys, monkey
 def test_missing_writers_and_meshes_are_named_before_the_work(work, capsys, monkeypatch):
     """An MP4 without imageio-ffmpeg and the peers' bunny without pymeshfix stop the command before
     the frames or renders it would otherwise finish first."""
-    from paramlod.app import dist
-    from paramlod.app.bench import peers
-
     real = dist.importlib.util.find_spec
     monkeypatch.setattr(dist.importlib.util, "find_spec", lambda m, *a: None if m == "imageio_ffmpeg" else real(m, *a))
     monkeypatch.setattr(dist, "render_frame", lambda *a, **k: pytest.fail("rendered before checking the video"))
@@ -332,8 +329,6 @@ def test_missing_writers_and_meshes_are_named_before_the_work(work, capsys, monk
 def test_every_setting_of_another_kind_is_a_named_error():
     """Each field of each RenderSettings group set to a string, a list, None, a table or NaN validates
     or fails with a ParamlodError (a string density met '<=' with a TypeError)."""
-    import dataclasses
-
     groups = [f.name for f in dataclasses.fields(pl.RenderSettings())
               if dataclasses.is_dataclass(getattr(pl.RenderSettings(), f.name))]
     assert {"lod", "points", "tess"} <= set(groups)
@@ -351,8 +346,6 @@ def test_every_setting_of_another_kind_is_a_named_error():
 def test_api_arguments_of_another_kind_are_named_errors():
     """Were a ValueError from numpy, a TypeError from len(None), an AttributeError on a dict and a
     ValueError from numpy."""
-    from paramlod import views
-
     scene = pl.Scene()
     scene.add("torus")
     cam = pl.Camera.look_at((0, -3, 2), (0, 0, 0), up=(0, 0, 1), size=(16, 12))

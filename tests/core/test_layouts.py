@@ -18,6 +18,8 @@ from paramlod.device.context import cl_device, gl_context
 from paramlod.device.programs import build
 from paramlod.function.registry import get_function
 from paramlod.lod.patches import EVAL_DTYPE, RENDER_DTYPE
+from paramlod.meshlod import raster
+from paramlod.renderers import points, points_lfb
 from paramlod.renderers.tess import PATCH_ATTRIBUTES, PATCH_FORMAT, _stage
 
 STRUCTS = [r for r in RECORDS if r.struct]
@@ -61,9 +63,6 @@ def test_host_names_derive_from_the_declarations():
     assert (stage.LOD_COUNTERS, stage.LOD_RENDER_TOTAL, stage.LOD_LOCAL) == (10, 1, 32)
     assert [stage.C_CHILDREN, stage.C_SPLIT, stage.C_CULLED, stage.C_RENDERED, stage.C_FORCED] == [0, 1, 2, 3, 4]
     # the render kernels' counters: what the host reads by name is the record's (PTS_*, LFB_*, RS_*)
-    from paramlod.meshlod import raster
-    from paramlod.renderers import points, points_lfb
-
     assert [layouts.POINTS_COUNTER.offset(k) for k in points.COUNTERS] == [0, 1, 2, 3]
     assert (points.SCHED_WORD, points.UNITS_WORD, points.COUNTER_WORDS) == (4, 5, 6)
     assert points_lfb.LFB_COUNTERS[0] == "tile_patch_pairs" and len(points_lfb.LFB_COUNTERS) == 12

@@ -329,11 +329,11 @@ def surfel_costs(size) -> dict:
 # --- driver -----------------------------------------------------------------------------------------
 DEFAULT_EXTRAS = ("ceilings", "functions", "surfels", "meshes")
 _BENCH_EXTRA = "pip install 'paramlod[bench]'"
+_BUNNY = "it ships the Stanford bunny scan that is measured (pip install pymeshfix)"
 # the optional modules an extra imports, and where each comes from
 EXTRA_NEEDS = {
-    "meshes": {"pymeshfix": "it ships the Stanford bunny scan that is measured (pip install pymeshfix)"},
-    "mesh-eval": {"pymeshfix": "it ships the Stanford bunny scan that is measured (pip install pymeshfix)",
-                  "flip_evaluator": _BENCH_EXTRA, "skimage": _BENCH_EXTRA},
+    "meshes": {"pymeshfix": _BUNNY},
+    "mesh-eval": {"pymeshfix": _BUNNY, "flip_evaluator": _BENCH_EXTRA, "skimage": _BENCH_EXTRA},
     "hybrid": {"flip_evaluator": _BENCH_EXTRA},
 }
 
