@@ -132,8 +132,9 @@ inline bool occluded(__global const float* b, __global const uint* pyramid, uint
 }
 
 // Phase 1: bound every render patch (kept for phase 2) and test it against the previous frame's
-// pyramid (levels 0: none, draw everything). counts: [0] patches drawn now (copied to `early`),
-// [1] deferred (their indices in `deferred`), [2] drawn in phase 2; zeroed by the host.
+// pyramid (levels 0: none, draw everything). counts: OCC_EARLY patches drawn now (copied to
+// `early`), OCC_DEFERRED (their indices in `deferred`), OCC_LATE drawn in phase 2 (the prelude's
+// OCC_COUNTER); zeroed by the host.
 __kernel void occlusion_first(__global const RenderPatch* patches, __global const uint* count, uint count_at,
                               uint capacity, __global const float* inst_f, __global const uint* inst_u,
                               __global const float* params, __global const float* cam, float widen,
@@ -150,8 +151,8 @@ __kernel void occlusion_first(__global const RenderPatch* patches, __global cons
         __global const float* P = params + inst_u[rp.inst * INST_U + INST_PARAMS];
         __global float* b = bounds + pid * OCC_FLOATS;
         patch_bound(rp, func, P, I, cam, widen, b);
-        if (levels && occluded(b, pyramid, W, H, levels)) deferred[atomic_inc(&counts[1])] = pid;
-        else early[atomic_inc(&counts[0])] = rp;
+        if (levels && occluded(b, pyramid, W, H, levels)) deferred[atomic_inc(&counts[OCC_DEFERRED])] = pid;
+        else early[atomic_inc(&counts[OCC_EARLY])] = rp;
     }
 }
 
@@ -160,10 +161,10 @@ __kernel void occlusion_second(__global const RenderPatch* patches, __global con
                                __global const uint* pyramid, uint levels, __global const float* bounds,
                                __global const uint* deferred, __global RenderPatch* late, __global uint* counts)
 {
-    uint n = counts[1];
+    uint n = counts[OCC_DEFERRED];
     uint W = (uint)cam[CAM_W], H = (uint)cam[CAM_H];
     for (uint i = get_global_id(0); i < n; i += get_global_size(0)) {
         uint pid = deferred[i];
-        if (!occluded(bounds + pid * OCC_FLOATS, pyramid, W, H, levels)) late[atomic_inc(&counts[2])] = patches[pid];
+        if (!occluded(bounds + pid * OCC_FLOATS, pyramid, W, H, levels)) late[atomic_inc(&counts[OCC_LATE])] = patches[pid];
     }
 }

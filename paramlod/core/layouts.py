@@ -265,6 +265,13 @@ POINTS_COUNTER = Record(
         Field("units", ULONG, 1, "the most units a list of the frame holds (the host checks MAX_UNITS)"),
     ], prefix="PTS", size="PTS_COUNTERS")
 
+OCC_COUNTER = Record(
+    "occlusion counts", "occlusion_first and occlusion_second (paramlod.renderers.occlusion)", [
+        Field("early", UINT, 1, "patches drawn now (listed in `early`)"),
+        Field("deferred", UINT, 1, "patches deferred to the second test (their indices in `deferred`)"),
+        Field("late", UINT, 1, "of them drawn after the second test (listed in `late`)"),
+    ], prefix="OCC", size="OCC_COUNTS")
+
 LFB_COUNTER = Record(
     "points-ssaa counters", "lfb_count and points_lfb (paramlod.renderers.points_lfb)", [
         Field("tile_patch_pairs", ULONG, 1, "(tile, patch) pairs"),
@@ -326,7 +333,7 @@ SURFEL_COUNTER = Record(
     ], prefix="SF", size="SF_COUNTERS")
 
 RECORDS = (CAMERA, INSTANCE_F, INSTANCE_U, MATERIAL, LIGHT, LOD_COUNTER, EVAL_PATCH, RENDER_PATCH, CLUSTER, GRID_VERTEX,
-           POINTS_COUNTER, LFB_COUNTER, RASTER_COUNTER, CUT_COUNTER, SAMPLER_COUNTER, SURFEL_VIEW,
+           POINTS_COUNTER, OCC_COUNTER, LFB_COUNTER, RASTER_COUNTER, CUT_COUNTER, SAMPLER_COUNTER, SURFEL_VIEW,
            SURFEL_COUNTER)
 
 # Constants the host and the kernels share that belong to no record: work-group sizes the host

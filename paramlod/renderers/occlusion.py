@@ -13,13 +13,13 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from paramlod.core.layouts import RENDER_PATCH
+from paramlod.core.layouts import OCC_COUNTER, RENDER_PATCH
 from paramlod.device.context import cl_device
 from paramlod.device.programs import launch
 
 GRID = 5        # positions per side of a patch's bound
 BOUND_FLOATS = 8   # floats per bound: x0, y0, x1, y1 (pixels), near depth, 3 unused
-COUNTS = ("early", "deferred", "late")   # occlusion.cl counts[0..2]
+COUNTS = tuple(f.name for f in OCC_COUNTER.fields)   # occlusion.cl counts[OCC_*]
 LOCAL = 64
 
 
@@ -124,7 +124,7 @@ class OcclusionCuller:
     def enqueue_first(self, patches_buf, count_buf, count_at: int, capacity: int, inst, cam_buf,
                       widen: float, size):
         """Bound and test the ``count_buf[count_at]`` render patches (at most ``capacity``);
-        ``self.early`` / ``counts_buf[0]`` then list the ones to draw now."""
+        ``self.early`` / ``counts_buf[OCC_EARLY]`` then list the ones to draw now."""
         capacity = max(int(capacity), 1)
         self._ensure(capacity, size)
         q = cl_device().queue
@@ -139,7 +139,7 @@ class OcclusionCuller:
 
     def enqueue_second(self, patches_buf, cam_buf, keys, capacity: int):
         """Build this frame's pyramid from ``keys`` and re-test the deferred patches;
-        ``self.late`` / ``counts_buf[2]`` then list the ones to draw."""
+        ``self.late`` / ``counts_buf[OCC_LATE]`` then list the ones to draw."""
         q = cl_device().queue
         self.events += self.current.enqueue_build(keys)
         cur = self.current

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from paramlod.core.layouts import POINTS_COUNTER
+from paramlod.core.layouts import OCC_COUNTER, POINTS_COUNTER
 from paramlod.device.context import cl_device
 from paramlod.errors import CapacityError
 from paramlod.lod.stage import LOD_RENDER_TOTAL, LodStage
@@ -287,9 +287,9 @@ class DirectPoints:
         occ, cap = self.occlusion, lod.render.capacity
         occ.enqueue_first(lod.render.buf, lod.counters, LOD_RENDER_TOTAL, cap, d["inst"], d["cam"],
                           settings.points.widen, (target.width, target.height))
-        pts.enqueue(occ.early, occ.counts_buf, 0, cap, *draw)
+        pts.enqueue(occ.early, occ.counts_buf, OCC_COUNTER.offset("early"), cap, *draw)
         occ.enqueue_second(lod.render.buf, d["cam"], target, cap)
-        pts.enqueue(occ.late, occ.counts_buf, 2, cap, *draw, phase=1)
+        pts.enqueue(occ.late, occ.counts_buf, OCC_COUNTER.offset("late"), cap, *draw, phase=1)
         occ.swap()
 
     def _enqueue_tier(self, target, settings, tier: int):
