@@ -2,6 +2,7 @@
 import os
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -12,6 +13,12 @@ def test_wheel_installs_and_renders(tmp_path):
     subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
                     "-w", str(wheels), str(ROOT)], check=True)
     (wheel,) = wheels.glob("paramlod-*.whl")
+    # every kernel source of the tree is in the wheel (a new kernel room must be named in pyproject.toml)
+    with zipfile.ZipFile(wheel) as z:
+        shipped = {n.removeprefix("paramlod/kernels/") for n in z.namelist() if n.startswith("paramlod/kernels/")}
+    sources = {str(f.relative_to(ROOT / "kernels")) for f in (ROOT / "kernels").rglob("*.*")
+               if f.suffix in (".cl", ".glsl")}
+    assert sources and not sources - shipped, sorted(sources - shipped)
     site = tmp_path / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(site), str(wheel)],
                    check=True)
