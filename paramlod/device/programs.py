@@ -192,3 +192,16 @@ def set_uniform(prog, name: str, value) -> None:
         u.write(np.ascontiguousarray(value, np.float32).tobytes())
     else:
         u.value = value
+
+
+def check_block(prog, name: str, nbytes: int, source: str) -> None:
+    """Check that uniform block ``name`` of a moderngl program (if the compiler kept it) takes
+    ``nbytes``, the size of the records Python writes into it: the GLSL struct in ``source`` and
+    its Python mirror must change together."""
+    try:
+        size = prog[name].size
+    except KeyError:
+        return
+    if size != nbytes:
+        raise RuntimeError(f"uniform block {name} of {source} takes {size} bytes, its records written from "
+                           f"Python {nbytes}: change them together")

@@ -47,7 +47,7 @@ from paramlod.core.frame import Frame, FrameStats
 from paramlod.core.layouts import INSTANCE_U, glsl_prelude
 from paramlod.core.views import MAX_VIEWS, Views
 from paramlod.device.context import gl_cache, gl_context
-from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
+from paramlod.device.programs import GLSL_LINE, check_block, context_lines, set_uniform
 from paramlod.errors import DeviceError, MeshError
 from paramlod.meshlod.buffers import MeshArrays, MeshInstances
 from paramlod.renderers.gl_targets import GLTargets, GrowBuffer, LayeredGLTargets, effective_aa, gl_matrix, targets_for
@@ -90,6 +90,7 @@ def _program(ctx, color_by: int, views_per_draw: int = 0):
             raise DeviceError(f"the mesh draw's shaders do not compile on {ctx.info.get('GL_RENDERER')} "
                               f"({stage}):\n{context_lines(stages[stage], log, GLSL_LINE)}\n"
                               f"compiler said:\n{log[-2000:]}") from None
+        check_block(prog, "PlViews", MAX_VIEWS * VIEW_RECORD, "kernels/meshlod/mesh_common.glsl")
         programs[key] = prog
     return prog
 

@@ -60,7 +60,7 @@ from paramlod.core.views import MAX_VIEWS, Views, as_views
 from paramlod.core.layouts import GRID_VERTEX, RENDER_PATCH, glsl_prelude, vertex_format
 from paramlod.core.transforms import in_range
 from paramlod.device.context import cl_device, gl_cache, gl_context
-from paramlod.device.programs import GLSL_LINE, context_lines, set_uniform
+from paramlod.device.programs import GLSL_LINE, check_block, context_lines, set_uniform
 from paramlod.errors import FunctionError, SceneError
 from paramlod.function.codegen_glsl import glsl_dispatch_source
 from paramlod.lod.patches import RENDER_DTYPE, render_tiers
@@ -306,6 +306,7 @@ def build_programs(ctx, functions, spacing: str, invocations: int = 0, grid: boo
         if invocations:
             stages["geometry_shader"] = _stage(tess_defs, [*views, kernels.source("tess/tess_geometry.glsl")])
         progs = programs[key] = _program(ctx, stages, functions)
+        check_block(progs, "PlViews", MAX_VIEWS * VIEW_FLOATS * 4, "kernels/tess/tess_views.glsl")
     return progs
 
 

@@ -13,12 +13,16 @@ import numpy as np
 import pytest
 
 import paramlod as pl
-from paramlod.core.views import Views, cube_faces
+from paramlod.core.views import MAX_VIEWS, Views, cube_faces
+from paramlod.device.context import gl_context
+from paramlod.device.programs import check_block
 from paramlod.errors import SceneError
+from paramlod.function.registry import get_function
 from paramlod.lod.stage import LodSettings, LodStage
 from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.shading import LIGHT
-from paramlod.renderers.tess import TessRenderer, TessSettings, view_chunks
+from paramlod.meshlod.draw import VIEW_RECORD, _program as mesh_program
+from paramlod.renderers.tess import VIEW_FLOATS, TessRenderer, TessSettings, build_programs, view_chunks
 
 SIZE = (96, 72)
 FIXED = TessSettings(mode="fixed", levels=(10, 10))
@@ -250,3 +254,15 @@ def test_draw_views_checks_its_input():
     for bad in (0, 33, 2.5, True):
         with pytest.raises(SceneError, match="views_per_pass"):
             TessSettings(views_per_pass=bad).validate()
+
+
+def test_the_views_block_is_the_size_python_writes():
+    # PlViews' GLSL structs (tess_views.glsl, mesh_common.glsl) and the records Python writes into
+    # them are written twice; the programs check their sizes when built, and say so when they differ
+    ctx = gl_context()
+    tess = build_programs(ctx, [get_function("sphere")], "equal", invocations=2)
+    mesh = mesh_program(ctx, 0, 2)
+    assert tess["PlViews"].size == MAX_VIEWS * VIEW_FLOATS * 4
+    assert mesh["PlViews"].size == MAX_VIEWS * VIEW_RECORD
+    with pytest.raises(RuntimeError, match=f"PlViews of kernels/tess/tess_views.glsl takes {MAX_VIEWS * 144} bytes"):
+        check_block(tess, "PlViews", MAX_VIEWS * 32 * 4, "kernels/tess/tess_views.glsl")
