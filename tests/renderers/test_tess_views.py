@@ -20,8 +20,8 @@ from paramlod.errors import SceneError
 from paramlod.function.registry import get_function
 from paramlod.lod.stage import LodSettings, LodStage
 from paramlod.lod.uploads import SceneBuffers
-from paramlod.renderers.shading import LIGHT
 from paramlod.meshlod.draw import VIEW_RECORD, _program as mesh_program
+from paramlod.renderers.shading import LIGHT
 from paramlod.renderers.tess import VIEW_FLOATS, TessRenderer, TessSettings, build_programs, view_chunks
 
 SIZE = (96, 72)
