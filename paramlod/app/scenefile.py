@@ -137,6 +137,9 @@ class _Checker:
         return v
 
 
+FILE_OBJECT_NAMES = {"mesh": "mesh file", "surfels": "surfel file"}   # file_object_kind -> words
+
+
 def file_object_kind(path) -> str | None:
     """"mesh" (a mesh file or a built .meshlod) or "surfels" (a .surfels file) for a file that
     is drawn alone where a scene file is expected; None for anything else (a scene file)."""
@@ -150,7 +153,7 @@ def _file_object_scene(path: Path, kind: str, size) -> SceneFile:
     """A mesh or surfel file alone: its default material and LOD, framed, at ``size`` or 960x540;
     meshes drawn by meshlets."""
     if not path.is_file():
-        what = "mesh file" if kind == "mesh" else "surfel file"
+        what = FILE_OBJECT_NAMES[kind]
         raise SceneError(f"{what} {path} does not exist" if not path.exists() else f"{what} {path} is not a file")
     scene = Scene()
     if kind == "mesh":

@@ -251,8 +251,6 @@ GRID_VERTEX = Record(
         Field("inst", UINT, 1, "the instance"),
     ], struct="GridVertex")
 
-
-
 # The render kernels' statistics counters (one ulong each, added with atom_add; the host zeroes
 # them before a frame and reads them after it)
 POINTS_COUNTER = Record(

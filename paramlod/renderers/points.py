@@ -23,7 +23,7 @@ from paramlod.device.programs import launch
 from paramlod.function.programs import POLY_TRIG, VECTOR, build, sample_run
 
 # the statistics of POINTS_COUNTER (points.cl PTS_*); its last two words are the schedule's
-COUNTERS = ("samples", "atomics", "nan_samples", "capped_patches")
+COUNTERS = tuple(f.name for f in POINTS_COUNTER.fields if f.name not in ("sched", "units"))
 COUNTER_WORDS = POINTS_COUNTER.length
 SCHED_WORD, UNITS_WORD = POINTS_COUNTER.offset("sched"), POINTS_COUNTER.offset("units")
 # points.cl order[]: a patch's first unit in 32 bits (and a work-item's unit may pass the last by

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from paramlod.app import dist
-from paramlod.app.scenefile import file_object_kind
+from paramlod.app.scenefile import FILE_OBJECT_NAMES, file_object_kind
 from paramlod.errors import FunctionError, ParamlodError
 from paramlod.function import registry
 from paramlod.function.define import ParametricFunction
@@ -74,8 +74,7 @@ class Source:
         # a mesh or surfel file loads as a scene of that one object (paramlod.app.scenefile)
         self.kind = "scene" if suffix == ".toml" or alone else "plugin" if suffix == ".py" else "function"
         if self.kind != "function" and not path.is_file():
-            what = ("plugin file" if self.kind == "plugin" else
-                    {"mesh": "mesh file", "surfels": "surfel file"}.get(alone, "scene file"))
+            what = "plugin file" if self.kind == "plugin" else FILE_OBJECT_NAMES.get(alone, "scene file")
             raise ParamlodError(f"{what} {path} does not exist" if not path.exists() else f"{what} {path} is not a file")
         self.path = path.resolve() if self.kind != "function" else None
         self.function_index = 0

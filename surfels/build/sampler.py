@@ -261,7 +261,8 @@ class Sampler:
             first = self.append(keys, take)
             self.splat_voronoi(first, take, splat_r2(r2max))
             self.q.finish()
-            self.rounds.append(RoundStats(len(self.rounds) + 1, first, int(self.counters.get()[SAMPLER_COUNTER.offset("eligible")]), m, take,
+            eligible = int(self.counters.get()[SAMPLER_COUNTER.offset("eligible")])
+            self.rounds.append(RoundStats(len(self.rounds) + 1, first, eligible, m, take,
                                           float(np.sqrt(r2max)), (time.perf_counter() - t0) * 1e3))
             if progress is not None:
                 progress(self.n, float(np.sqrt(r2max)))

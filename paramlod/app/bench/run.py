@@ -89,6 +89,12 @@ def apply_run_defaults(args, kind: str) -> list[str]:
     return filled
 
 
+def _run_text(d: dict) -> str:
+    """RUN_DEFAULTS entry ``d`` in words."""
+    return (f"{d['size'][0]}x{d['size'][1]}, distances {' '.join(f'{x:g}' for x in d['distances'])}, "
+            f"{d['frames']} frames after {d['warmup']} warm-up")
+
+
 def add_arguments(p):
     p.add_argument("scenarios", nargs="*", help=f"scenarios (default: {' '.join(DEFAULT)}; all: "
                                                 f"{' '.join(SCENARIOS)})")
@@ -373,10 +379,9 @@ def run_bench(args) -> int:
     kind = "GPU" if dev.is_gpu else "CPU"
     filled = apply_run_defaults(args, kind)
     if kind == "CPU" and filled:
-        print(f"paramlod bench: on a CPU device the defaults are {args.size[0]}x{args.size[1]}, distances "
-              f"{' '.join(f'{d:g}' for d in args.distances)}, {args.frames} frames after {args.warmup} warm-up "
-              f"(a GPU's: 1920x1080, 0.35 0.6 1 2, 8 after 2, hours of frames here); set --size, --distances, "
-              "--frames, --warmup to change them", flush=True)
+        print(f"paramlod bench: on a CPU device the defaults are {_run_text(RUN_DEFAULTS['CPU'])} "
+              f"(a GPU's: {_run_text(RUN_DEFAULTS['GPU'])}, hours of frames here); set --size, --distances, --frames, --warmup "
+              "to change them", flush=True)
     size = args.size
     result = {"device": dev.name, "device_type": kind, "host": platform.node(),
               "size": list(size), "frames": args.frames, "warmup": args.warmup, "detail_angle": args.detail_angle,
