@@ -5,8 +5,8 @@
 
 #include "common/debug_color.cl"
 
-// THIN_LOOP_1, THIN_LOOP_2, THIN_ALONG, COVER_REACH, COVER_OWN and POINTS_LOCAL come from the
-// build (paramlod.renderers.sampling.points_cl_defines), where the numpy twins read them too
+// THIN_LOOP_1/2/3/5, THIN_ALONG, COVER_REACH, COVER_OWN and POINTS_LOCAL come from the build
+// (paramlod.renderers.sampling.points_cl_defines), where the numpy twins read them too
 #ifndef POINTS_LOCAL
 #error "build points.cl with paramlod.renderers.sampling.points_cl_defines()"
 #endif
@@ -92,32 +92,39 @@ inline uint2 patch_wraps(RenderPatch rp, __global const float* I, uint flags) {
 
 // A patch's two grid directions, as point_grid samples them and patch_units counts them.
 // Thin tubes (`curve` > 0: PointSettings.curve_factor, pixel coverage): a patch that wraps around
-// an axis whose loop measures at most THIN_LOOP_2 target pixels (a tube under a pixel across)
-// covers no pixel whole, so the hole-free spacing of `factor` buys nothing around it: one line
-// around, or two on opposite sides over THIN_LOOP_1 pixels (under a pixel apart on screen). A
-// loop of at least 1 pixel (a tube at least 1/pi pixel across) is also sampled along at
-// THIN_ALONG x `curve`, under a pixel apart, so the pixels it lands in stay 8-connected as a
-// rasterized line's; thinner tubes share pixels with their neighbours, and the denser samples
-// decide which is in front (docs/points.md, "Thin tubes"). v is tested first.
+// an axis whose loop measures at most THIN_LOOP_5 target pixels (a tube under 1.7 pixels across)
+// needs no hole-free surface grid around it: n lines evenly around a tube of radius r project at
+// most g(n) r apart (g = 2, 2, 1.5, 1.12 for n = 1, 2, 3, 5), so one line around loops of up to
+// THIN_LOOP_1 pixels, two on opposite sides up to THIN_LOOP_2, three up to THIN_LOOP_3 and five up
+// to THIN_LOOP_5 keep neighbouring lines' pixels touching. A loop of 1 to THIN_LOOP_2 pixels (a
+// tube under a pixel across) is also sampled along at THIN_ALONG x `curve`, under a pixel apart,
+// so the pixels it lands in stay 8-connected as a rasterized line's; thinner tubes share pixels
+// with their neighbours, and the denser samples decide which is in front; wider ones keep
+// `factor` along (docs/points.md, "Thin tubes"). v is tested first.
 // THIN_ALONG (samples per target pixel along a thin tube) is over one because the measure sums
 // chords of the LOD stage's segments, which fall short of the fastest part of a curve (a ring seen
 // near edge on: up to ~14 %); at one a pixel, 4 of 108 thin rings seen at 75-85 degrees came out
 // with a 1-pixel gap, at 1.1 none
+inline uint thin_lines(float loop) {   // grid lines around a thin tube, the wrapped copy included
+    return loop <= THIN_LOOP_1 ? 2u : loop <= THIN_LOOP_2 ? 3u : loop <= THIN_LOOP_3 ? 4u : 6u;
+}
+
 inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, float factor, float curve,
                        uint measure, uint max_side, GridAxis* gu, GridAxis* gv) {
     float2 m = patch_measure(rp, measure);
     uint2 wraps = patch_wraps(rp, I, flags);
     float2 loop = m * curve;   // target pixels around
-    uint thin_v = curve > 0.0f && wraps.y && loop.y <= THIN_LOOP_2;
-    uint thin_u = curve > 0.0f && !thin_v && wraps.x && loop.x <= THIN_LOOP_2;
+    uint thin_v = curve > 0.0f && wraps.y && loop.y <= THIN_LOOP_5;
+    uint thin_u = curve > 0.0f && !thin_v && wraps.x && loop.x <= THIN_LOOP_5;
     float along = pl_fminf(factor, THIN_ALONG * curve);
-    float fu = thin_v && loop.y >= 1.0f ? along : factor, fv = thin_u && loop.x >= 1.0f ? along : factor;
+    float fu = thin_v && loop.y >= 1.0f && loop.y <= THIN_LOOP_2 ? along : factor;
+    float fv = thin_u && loop.x >= 1.0f && loop.x <= THIN_LOOP_2 ? along : factor;
     *gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, fu, max_side);
     *gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, fv, max_side);
     // one line around (2 grid lines less the wrapped copy): a second on the far side, at most a
     // pixel away, doubled the fibre curtain's samples and left its pixels and FLIP as they were
-    if (thin_u) { gu->n = min(gu->n, loop.x <= THIN_LOOP_1 ? 2u : 3u); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
-    if (thin_v) { gv->n = min(gv->n, loop.y <= THIN_LOOP_1 ? 2u : 3u); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
+    if (thin_u) { gu->n = min(gu->n, thin_lines(loop.x)); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
+    if (thin_v) { gv->n = min(gv->n, thin_lines(loop.y)); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
 #if PL_QUADS
     // quads around a tube need 3 lines around (4 grid lines with the wrapped copy): between 2 they
     // are a flat ribbon that vanishes edge on, and one line and its copy make quads without area

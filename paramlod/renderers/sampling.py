@@ -31,9 +31,10 @@ SAMPLING = ("segment", "extent")
 COLOR_BY = ("material", "patch", "level", "tier")
 COVERAGE = ("centre", "pixel", "quad")   # PointSettings.coverage
 # thin tubes (points.cl patch_axes): loops around of at most THIN_LOOP_1 target pixels drawn with
-# one line around, of at most THIN_LOOP_2 (a tube under a pixel across) with two
+# one line around, of at most THIN_LOOP_2 (a tube under a pixel across) with two, then 3 and 5
 THIN_LOOP_1, THIN_LOOP_2 = np.float32(2), np.float32(3)
-THIN_ALONG = np.float32(1.2)   # samples per target pixel along them (points.cl: the measure's chords)
+THIN_LOOP_3, THIN_LOOP_5 = np.float32(4), np.float32(5.35)
+THIN_ALONG = np.float32(1.2)   # samples per target pixel along loops of 1 to THIN_LOOP_2 (points.cl)
 POINTS_LOCAL = 64   # work-group size of points_direct (points.cl reqd_work_group_size)
 # the kernels' `measure` argument (kernels/points/points.cl patch_measure): which RenderPatch
 # columns a grid is sized from
@@ -205,16 +206,18 @@ def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool
     if wraps is not None and curve > 0:
         with np.errstate(invalid="ignore", over="ignore"):   # inf and NaN measures: no thin tubes
             loop = (m * curve).astype(np.float32)
-        small = wraps & (loop <= THIN_LOOP_2)
+        small = wraps & (loop <= THIN_LOOP_5)
         thin[:, 1] = small[:, 1]
         thin[:, 0] = small[:, 0] & ~small[:, 1]
     out = []
     for k in range(2):   # sampled along at THIN_ALONG x `curve` where the loop around is 1 to 3 pixels
-        curve_along = thin[:, 1 - k] & (loop[:, 1 - k] >= np.float32(1))
+        around = loop[:, 1 - k]
+        curve_along = thin[:, 1 - k] & (around >= np.float32(1)) & (around <= THIN_LOOP_2)
         along = np.where(curve_along, min(factor, THIN_ALONG * curve), factor).astype(np.float32)
         n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings, along)
-        # one line around, or 2 (and the wrapped copy)
-        n = np.where(thin[:, k], np.minimum(n, np.where(loop[:, k] <= THIN_LOOP_1, 2, 3)), n)
+        # 1, 2, 3 or 5 lines around (and the wrapped copy)
+        lines = np.select([loop[:, k] <= t for t in (THIN_LOOP_1, THIN_LOOP_2, THIN_LOOP_3)], [2, 3, 4], 6)
+        n = np.where(thin[:, k], np.minimum(n, lines), n)
         if wraps is None:
             out.append(n)
             continue
@@ -248,7 +251,8 @@ COVER_OWN = 0x80000000  # the cell is degenerate: the sample covers its own pixe
 def points_cl_defines() -> dict:
     """The constants kernels/points/points.cl is built with (paramlod.device.programs.build): this
     module's, so that the kernels and their numpy twins here read one source."""
-    return {"THIN_LOOP_1": THIN_LOOP_1, "THIN_LOOP_2": THIN_LOOP_2, "THIN_ALONG": THIN_ALONG,
+    return {"THIN_LOOP_1": THIN_LOOP_1, "THIN_LOOP_2": THIN_LOOP_2, "THIN_LOOP_3": THIN_LOOP_3,
+            "THIN_LOOP_5": THIN_LOOP_5, "THIN_ALONG": THIN_ALONG,
             "COVER_REACH": COVER_REACH, "COVER_OWN": f"{COVER_OWN:#x}u", "POINTS_LOCAL": POINTS_LOCAL}
 
 

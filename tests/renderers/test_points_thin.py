@@ -1,6 +1,6 @@
 """Thin tubes (``PointSettings.thin_tubes``): a patch whose surface closes around an axis in a loop
-of at most 3 target pixels is drawn by the direct variant as a curve, with one line around (2 on
-opposite sides over 2 pixels) (kernels/points/points.cl patch_axes; twin
+of at most 5.35 target pixels is drawn by the direct variant as a curve, with one line around (2 on
+opposite sides over 2 pixels, 3 over 3, 5 over 4) (kernels/points/points.cl patch_axes; twin
 paramlod.renderers.sampling.grid_counts)."""
 import numpy as np
 import pytest
@@ -15,19 +15,19 @@ from conftest import check_every_sample_once, record_direct_points
 from helpers.stages import ParametricStage
 
 CAM = pl.Camera.look_at((0.0, 0.4, 3.0), (0.0, 0.0, 0.0), size=(200, 140))
-# rings whose tubes are about 0.2, 0.4, 0.6, 1.5 and 0.8 pixels across: loops under 1 pixel, of 1
-# to 2, one that is no thin tube, and one of 2 to 3
-MINOR = (0.0015, 0.003, 0.0045, 0.012, 0.006)
+# rings whose tubes are about 0.2, 0.4, 0.6, 2.7, 0.8, 1.1 and 1.5 pixels across: loops under 1
+# pixel, of 1 to 2, one that is no thin tube, and loops of 2 to 3, 3 to 4 and 4 to 5.35
+MINOR = (0.0015, 0.003, 0.0045, 0.02, 0.006, 0.0095, 0.0135)
 WIDE = 3   # the ring that is no thin tube
 
 
 def _rings():
     scene = pl.Scene()
     for k, minor in enumerate(MINOR):
-        x, y = (0.75 * k - 1.1, 0.1 * k - 0.15) if k < 4 else (0.0, -0.6)
+        x, y = (0.75 * k - 1.1, 0.1 * k - 0.15) if k < 4 else (0.75 * k - 3.75, -0.6)
         scene.add("torus", params={"major": 0.3, "minor": minor},
                   transform=pl.translate(x, y, 0.0) @ pl.rotate(25 + 20 * k, (1, 0.2, 0)),
-                  material=pl.Material(color=(0.9, 0.5 - 0.1 * k, 0.2 + 0.2 * k)))
+                  material=pl.Material(color=(0.9, 0.6 - 0.08 * k, 0.2 + 0.12 * k)))
     return scene
 
 
@@ -43,8 +43,8 @@ def test_the_rings_have_loops_of_every_kind():
     rl, wraps = _render_list(_rings(), pl.RenderSettings())
     loop = rl["w"][:, 1][wraps[:, 1]]   # v, the way around the tube: all patches span it whole
     assert wraps[:, 1].all()
-    assert (loop < 1).any() and ((loop >= 1) & (loop <= 2)).any() and ((loop > 2) & (loop <= 3)).any()
-    assert (loop > 3).any()
+    for low, high in ((0, 1), (1, 2), (2, 3), (3, 4), (4, 5.35), (5.35, np.inf)):
+        assert ((loop > low) & (loop <= high)).any(), (low, high)
 
 
 def test_the_kernel_samples_the_curves_the_twin_counts():
@@ -63,16 +63,17 @@ def test_thin_tubes_keep_their_pixels_with_fewer_samples():
     rs_on, rs_off = pl.RenderSettings(), pl.RenderSettings()
     rs_off.points.thin_tubes = False
     on, off = (pl.render(_rings(), CAM, "points", rs) for rs in (rs_on, rs_off))
-    # the frames took the samples the twin counts, and the thin rings (not the last) under half of
-    # them: one or 2 lines around instead of 2-5
+    # the frames took the samples the twin counts; the rings under a pixel across under half of
+    # them (one or 2 lines around instead of 2-5), the wider thin ones under 3/4 (3 or 5 lines
+    # around instead of 6-9)
     rl, wraps = _render_list(_rings(), rs_on)
-    thin = rl["inst"] != WIDE
+    narrow, wider = np.isin(rl["inst"], (0, 1, 2, 4)), np.isin(rl["inst"], (5, 6))
     counts = []
     for frame, rs in ((on, rs_on), (off, rs_off)):
         nu, nv = grid_counts(rl, rs.points, wraps=wraps)
         assert frame.stats["samples"] == int((nu * nv).sum())
-        counts.append(int((nu * nv)[thin].sum()))
-    assert counts[0] < 0.5 * counts[1]
+        counts.append([int((nu * nv)[m].sum()) for m in (narrow, wider)])
+    assert counts[0][0] < 0.5 * counts[1][0] and counts[0][1] < 0.75 * counts[1][1]
     # each ring drawn as a curve stays one 8-connected ring, covers no more pixels than drawn as a
     # surface (the pixel rule's widening shrinks) and at least its true area (16xSS coverage)
     rs_ref = pl.RenderSettings()
@@ -106,26 +107,28 @@ def test_thin_rings_seen_near_edge_on_stay_connected(minor, angle, axis):
 
 
 def test_grid_counts_by_hand():
-    # one patch wrapping v, 40 px long along u; loops of 0.8, 1.5, 2.5 and 3.5 px around
-    rl = np.zeros(4, RENDER_DTYPE)
+    # one patch wrapping v, 40 px long along u; loops of 0.8, 1.5, 2.5, 3.5, 5 and 6 px around
+    rl = np.zeros(6, RENDER_DTYPE)
     rl["ext"][:, 2] = rl["w"][:, 0] = 40.0
-    rl["w"][:, 1] = rl["ext"][:, 3] = (0.8, 1.5, 2.5, 3.5)
-    wraps = np.array([[False, True]] * 4)
+    rl["w"][:, 1] = rl["ext"][:, 3] = (0.8, 1.5, 2.5, 3.5, 5.0, 6.0)
+    wraps = np.array([[False, True]] * 6)
     on = pl.PointSettings()
     nu, nv = grid_counts(rl, on, wraps=wraps)
     # 0.8: 3 lines (ceil(1.2) + 1) capped at 2, less the wrap; along at density: ceil(40 * 1.5) + 1
     # 1.5: 4 lines (ceil(2.25) + 1) capped at 2, less the wrap; along 1.2 a pixel: ceil(40 * 1.2) + 1
     # 2.5: 5 lines capped at 3, less the wrap: 2 on opposite sides; along 1.2 a pixel
-    # 3.5: a surface, 7 lines less the wrap
-    assert nv.tolist() == [1, 1, 2, 6] and nu.tolist() == [61, 49, 49, 61]
+    # 3.5: 7 lines capped at 4, less the wrap: 3 around; along at density
+    # 5: 9 lines capped at 6, less the wrap: 5 around; along at density
+    # 6: a surface, 10 lines less the wrap
+    assert nv.tolist() == [1, 1, 2, 3, 5, 9] and nu.tolist() == [61, 49, 49, 61, 61, 61]
     off = grid_counts(rl, pl.PointSettings(thin_tubes=False), wraps=wraps)
-    assert [x.tolist() for x in off] == [[61, 61, 61, 61], [2, 3, 4, 6]]
+    assert [x.tolist() for x in off] == [[61] * 6, [2, 3, 4, 6, 8, 9]]
     # pixel-centre and quad coverage rasterize cells, which a one-line tube would lack: no curves;
     # quads take 3 lines around a tube at least
     centre, quad = pl.PointSettings(coverage="centre"), pl.PointSettings(coverage="quad")
     assert centre.curve_factor() == quad.curve_factor() == 0
     assert [x.tolist() for x in grid_counts(rl, centre, wraps=wraps)] == [x.tolist() for x in off]
-    assert [x.tolist() for x in grid_counts(rl, quad, wraps=wraps)] == [[61, 61, 61, 61], [3, 3, 4, 6]]
+    assert [x.tolist() for x in grid_counts(rl, quad, wraps=wraps)] == [[61] * 6, [3, 3, 4, 6, 8, 9]]
     # a hybrid tier's target is `scale` times the measured pixels: the loop is measured in it
     assert on.curve_factor(2) == 2 * on.curve_factor() == 2
 
