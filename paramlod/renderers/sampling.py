@@ -189,6 +189,12 @@ def patch_wraps(render_list: np.ndarray, flags: np.ndarray, domains: np.ndarray)
                      for k, bit in enumerate((WRAP_U, WRAP_V))], axis=1)
 
 
+def thin_lines(loop: np.ndarray) -> np.ndarray:
+    """Twin of points.cl thin_lines: grid lines around a thin tube whose loop measures ``loop``
+    target pixels (1, 2, 3 or 5 lines around, and the wrapped copy)."""
+    return np.select([loop <= t for t in (THIN_LOOP_1, THIN_LOOP_2, THIN_LOOP_3)], [2, 3, 4], 6)
+
+
 def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool = True,
                 wraps: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(nu, nv) samples drawn per render patch, from the measure ``settings.sampling`` selects: as
@@ -215,9 +221,7 @@ def grid_counts(render_list: np.ndarray, settings: PointSettings, boundary: bool
         curve_along = thin[:, 1 - k] & (around >= np.float32(1)) & (around <= THIN_LOOP_2)
         along = np.where(curve_along, min(factor, THIN_ALONG * curve), factor).astype(np.float32)
         n, na, _ = grid_axes(ext[:, 2 + k], m[:, k], strips, settings, along)
-        # 1, 2, 3 or 5 lines around (and the wrapped copy)
-        lines = np.select([loop[:, k] <= t for t in (THIN_LOOP_1, THIN_LOOP_2, THIN_LOOP_3)], [2, 3, 4], 6)
-        n = np.where(thin[:, k], np.minimum(n, lines), n)
+        n = np.where(thin[:, k], np.minimum(n, thin_lines(loop[:, k])), n)
         if wraps is None:
             out.append(n)
             continue

@@ -19,6 +19,7 @@ CAM = pl.Camera.look_at((0.0, 0.4, 3.0), (0.0, 0.0, 0.0), size=(200, 140))
 # pixel, of 1 to 2, one that is no thin tube, and loops of 2 to 3, 3 to 4 and 4 to 5.35
 MINOR = (0.0015, 0.003, 0.0045, 0.02, 0.006, 0.0095, 0.0135)
 WIDE = 3   # the ring that is no thin tube
+NARROW, WIDER = (0, 1, 2, 4), (5, 6)   # the thin rings under a pixel across, and of 1.1 and 1.5
 
 
 def _rings():
@@ -67,7 +68,7 @@ def test_thin_tubes_keep_their_pixels_with_fewer_samples():
     # them (one or 2 lines around instead of 2-5), the wider thin ones under 3/4 (3 or 5 lines
     # around instead of 6-9)
     rl, wraps = _render_list(_rings(), rs_on)
-    narrow, wider = np.isin(rl["inst"], (0, 1, 2, 4)), np.isin(rl["inst"], (5, 6))
+    narrow, wider = np.isin(rl["inst"], NARROW), np.isin(rl["inst"], WIDER)
     counts = []
     for frame, rs in ((on, rs_on), (off, rs_off)):
         nu, nv = grid_counts(rl, rs.points, wraps=wraps)
