@@ -691,6 +691,18 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
             float scale = tier == 0u ? 1.0f : tier_scale.x;
             float cu = spot_cell(patch.range.y - patch.range.x, most_u, scale, 7.0f);
             float cv = spot_cell(patch.range.w - patch.range.z, most_v, scale, 3.0f);
+#if LOD_GROUP == 1   // CPU devices: a cell's corners only when its sub-samples are reached
+            uint mine = 0u;
+            for (uint cell = 0u; cell < SPOT_SUBS / 9u && mine < spot_min; ++cell) {
+                for (uint k = 4u * cell; k < 4u * cell + 4u; ++k) {
+                    float2 c = spot_corner(patch.range, cu, cv, k);
+                    spot_n[k] = (float4)(spot_normal(func, P, I, c.x, c.y), 0.0f);
+                }
+                for (uint k = 9u * cell; k < 9u * cell + 9u && mine < spot_min; ++k)
+                    mine += spot_turns(func, P, I, patch.range, cu, cv, spot_n, k, spot_cos) ? 1u : 0u;
+            }
+            spot_count = mine;
+#else
             if (l == 0u) spot_count = 0u;
             for (uint k = l; k < SPOT_CORNERS; k += LOD_GROUP) {
                 float2 c = spot_corner(patch.range, cu, cv, k);
@@ -698,13 +710,13 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
             }
             barrier(CLK_LOCAL_MEM_FENCE);
             // a work-item stops once its own count decides the patch (the group's is at least its
-            // own): on a CPU, one work-item a patch, a patch full of detail is decided in a few
-            // sub-samples instead of 189; the decision, all the stage keeps of the count, is the same
+            // own); the decision, all the stage keeps of the count, is the same
             uint mine = 0u;
             for (uint k = l; k < SPOT_SUBS && mine < spot_min; k += LOD_GROUP)
                 mine += spot_turns(func, P, I, patch.range, cu, cv, spot_n, k, spot_cos) ? 1u : 0u;
             if (mine) atomic_add(&spot_count, mine);
             barrier(CLK_LOCAL_MEM_FENCE);
+#endif
             promote = spot_count >= spot_min;
         }
         if (l == 0u) {

@@ -1,16 +1,16 @@
 // The hybrid tiers' spot check (thesis section 5.5.7, Listing 5.2): before a patch is rendered at
-// a tier that has a finer one, the LOD step looks for sub-pixel detail in the middle of the patch.
-// A region of 7 x 3 cells, each about one pixel of the tier's target (a pixel / tier divisor),
-// is laid over the patch's centre in (u, v); the surface normal at the 8 x 4 cell corners and at
-// nine sub-sample offsets per cell (every pair of 1/2, 1/3, 1/5 of the cell) comes from the
-// analytic partials. A sub-sample whose normal turns from the bilinear blend of its cell's corner
-// normals by more than the spot angle is detail the cell's pixel cannot show; with at least
-// `spot_min` such sub-samples (of 189) the patch goes to the next tier. Twin: spot_counts in
-// paramlod/lod/reference.py.
+// a tier that has a finer one, the LOD step looks for sub-pixel detail in the patch. 7 x 3 cells,
+// each about one pixel of the tier's target (a pixel / tier divisor), are spread evenly over the
+// patch in (u, v), cell (i, j) centred at (i + 1/2) / 7 of its u range and (j + 1/2) / 3 of its v
+// range (the thesis lays them side by side over the patch's middle, which misses a glyph lobe
+// elsewhere in a patch of many pixels); along an axis of at most 7 (3) tier pixels they tile it. The
+// surface normal at each cell's 4 corners and at nine sub-sample offsets per cell (every pair of
+// 1/2, 1/3, 1/5 of the cell) comes from the analytic partials. A sub-sample whose normal turns
+// from the bilinear blend of its cell's corner normals by more than the spot angle is detail the
+// cell's pixel cannot show; with at least `spot_min` such sub-samples (of 189) the patch goes to
+// the next tier. Twin: spot_counts in paramlod/lod/reference.py.
 
-#define SPOT_NU 8            // corners along u (7 cells)
-#define SPOT_NV 4            // corners along v (3 cells)
-#define SPOT_CORNERS 32
+#define SPOT_CORNERS 84      // 4 a cell: corner k of cell k / 4 (bit 0 of k: its far side in u, bit 1 in v)
 // SPOT_SUBS (from the host): 21 cells x 9 offsets
 
 // the sub-sample offsets within a cell, as a share of its side
@@ -35,22 +35,22 @@ inline float3 spot_normal(uint func, __global const float* P, __global const flo
     return n / len;
 }
 
-// Corner k (i = k % 8 along u, j = k / 8 along v) of the region centred in the patch.
+// Corner k's (u, v) (SPOT_CORNERS); cell c's first corner is k = 4c. The strides are products
+// (correctly rounded, as the twin's), not divisions.
 inline float2 spot_corner(float4 range, float cu, float cv, uint k) {
-    float uc = 0.5f * (range.x + range.y), vc = 0.5f * (range.z + range.w);
-    float fi = (float)(k % SPOT_NU) - 3.5f, fj = (float)(k / SPOT_NU) - 1.5f;
-    return (float2)(uc + fi * cu, vc + fj * cv);
+    uint cell = k / 4u;
+    float u = range.x + ((float)(cell % 7u) + 0.5f) * ((range.y - range.x) * (1.0f / 7.0f)) - 0.5f * cu;
+    float v = range.z + ((float)(cell / 7u) + 0.5f) * ((range.w - range.z) * (1.0f / 3.0f)) - 0.5f * cv;
+    return (float2)(u + (float)(k & 1u) * cu, v + (float)((k >> 1) & 1u) * cv);
 }
 
 // Whether sub-sample s (cell s / 9, offset pair s % 9) turns from its cell's blended corner normals
-// by more than acos(spot_cos); corner normals n[32] from spot_normal.
+// by more than acos(spot_cos); corner normals n[SPOT_CORNERS] from spot_normal.
 inline bool spot_turns(uint func, __global const float* P, __global const float* I, float4 range,
                        float cu, float cv, __local const float4* n, uint s, float spot_cos) {
-    uint cell = s / 9u, o = s % 9u;
-    uint i = cell % 7u, j = cell / 7u;
+    uint k = (s / 9u) * 4u, o = s % 9u;
     float a = spot_offset(o % 3u), b = spot_offset(o / 3u);
-    uint k = j * SPOT_NU + i;
-    float3 n00 = n[k].xyz, n10 = n[k + 1u].xyz, n01 = n[k + SPOT_NU].xyz, n11 = n[k + SPOT_NU + 1u].xyz;
+    float3 n00 = n[k].xyz, n10 = n[k + 1u].xyz, n01 = n[k + 2u].xyz, n11 = n[k + 3u].xyz;
     if (n00.x == 0.0f && n00.y == 0.0f && n00.z == 0.0f) return false;
     if (n10.x == 0.0f && n10.y == 0.0f && n10.z == 0.0f) return false;
     if (n01.x == 0.0f && n01.y == 0.0f && n01.z == 0.0f) return false;

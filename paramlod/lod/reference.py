@@ -467,20 +467,23 @@ def spot_counts(patches, scene_inst, functions, most_u, most_v, scale, spot_cos)
     n = len(r)
     cu = ((r[:, 1] - r[:, 0]) / np.fmax(F(most_u) * scale, F(7))).astype(F)
     cv = ((r[:, 3] - r[:, 2]) / np.fmax(F(most_v) * scale, F(3))).astype(F)
-    uc, vc = F(0.5) * (r[:, 0] + r[:, 1]), F(0.5) * (r[:, 2] + r[:, 3])
     cu_, cv_ = cu[:, None, None], cv[:, None, None]
-    ui = uc[:, None, None] + (np.arange(8, dtype=F) - F(3.5))[None, None, :] * cu_       # (n, 1, 8)
-    vj = vc[:, None, None] + (np.arange(4, dtype=F) - F(1.5))[None, :, None] * cv_       # (n, 4, 1)
-    ui, vj = np.broadcast_to(ui, (n, 4, 8)), np.broadcast_to(vj, (n, 4, 8))
-    corners = spot_normals(scene_inst, functions, np.broadcast_to(inst[:, None, None], (n, 4, 8)), ui, vj)
+    # cells (i, j) spread over the patch, centred at (i + 1/2) / 7 of u and (j + 1/2) / 3 of v
+    su, sv = (r[:, 1] - r[:, 0]) * (F(1) / F(7)), (r[:, 3] - r[:, 2]) * (F(1) / F(3))
+    u0 = r[:, 0, None, None] + (np.arange(7, dtype=F) + F(0.5))[None, None, :] * su[:, None, None] - F(0.5) * cu_
+    v0 = r[:, 2, None, None] + (np.arange(3, dtype=F) + F(0.5))[None, :, None] * sv[:, None, None] - F(0.5) * cv_
+    u0, v0 = np.broadcast_to(u0, (n, 3, 7)), np.broadcast_to(v0, (n, 3, 7))    # (n, 3 cells v, 7 cells u)
+    bit_u, bit_v = np.array([0, 1, 0, 1], F), np.array([0, 0, 1, 1], F)    # spot.cl spot_corner's bits
+    cu4, cv4 = cu[:, None, None, None], cv[:, None, None, None]
+    corners = spot_normals(scene_inst, functions, np.broadcast_to(inst[:, None, None, None], (n, 3, 7, 4)),
+                           u0[..., None] + bit_u * cu4, v0[..., None] + bit_v * cv4)    # (n, 3, 7, 4, 3)
     a = np.tile(SPOT_OFFSETS, 3)     # offset o: a = OFFSETS[o % 3], b = OFFSETS[o // 3]
     b = np.repeat(SPOT_OFFSETS, 3)
     # sub-samples (n, 3 cells v, 7 cells u, 9 offsets)
-    su = ui[:, :3, :7, None] + a * cu[:, None, None, None]
-    sv = vj[:, :3, :7, None] + b * cv[:, None, None, None]
+    su = u0[..., None] + F(0) * cu4 + a * cu4
+    sv = v0[..., None] + F(0) * cv4 + b * cv4
     ns = spot_normals(scene_inst, functions, np.broadcast_to(inst[:, None, None, None], su.shape), su, sv)
-    n00, n10 = corners[:, :3, :7, None], corners[:, :3, 1:, None]
-    n01, n11 = corners[:, 1:, :7, None], corners[:, 1:, 1:, None]
+    n00, n10, n01, n11 = (corners[:, :, :, None, c] for c in range(4))
     w = lambda x: x[..., None]   # noqa: E731  (weights over the vector axis)
     blend = (w((F(1) - a) * (F(1) - b)) * n00 + w(a * (F(1) - b)) * n10 + w((F(1) - a) * b) * n01
              + w(a * b) * n11).astype(F)

@@ -5,6 +5,7 @@ detail is measured again at the next tier's threshold. Kernel against twin, exac
 shapes never leave tier 0; seashell 3's bumps go to the finer tiers the farther it is."""
 import numpy as np
 import pytest
+from sympy import exp, sin
 
 import paramlod as pl
 from paramlod.app.bench.run import _orbit
@@ -109,6 +110,41 @@ def test_spot_counts_twin():
     small = spot_counts(patches, inst, s.functions(), np.full(n, 20, np.float32), np.full(n, 20, np.float32),
                         np.ones(n, np.float32), np.float32(np.cos(np.radians(20))))
     assert small[0] == 0 and small[1] > 0.5 * 189, small
+
+
+@pl.parametric(u=(0, 1), v=(0, 1))
+def corner_ripples(u, v):
+    """A flat sheet with fine ripples near one corner, far from the middle of the domain."""
+    return u, v, 0.004 * exp(-((u - 0.86) ** 2 + (v - 0.83) ** 2) / 0.01) * sin(300 * u)
+
+
+def test_the_spot_check_finds_detail_anywhere_in_a_patch():
+    """The cells are spread over the patch: ripples of 0.02 in u (under a pixel when the patch is
+    40 pixels wide) near one corner are found, by the twin and by the kernel, and the patch goes
+    to a finer tier. (The thesis's cells, side by side over the patch's middle, saw flat sheet
+    there: count 0, the patch stayed in tier 0.)"""
+    s = pl.Scene()
+    s.add(corner_ripples)
+    inst = s.instance_buffers()
+    patch = initial_patches(inst[0][:, 28:32])
+    spot_cos, spot_min = pl.LodSettings().spot()
+    count = spot_counts(patch, inst, s.functions(), np.float32([40]), np.float32([40]), np.ones(1, np.float32),
+                        spot_cos)
+    assert count[0] >= spot_min, count
+    # seen 2,000 pixels wide, a ripple spans 40 pixels: no sub-pixel detail
+    near = spot_counts(patch, inst, s.functions(), np.float32([2000]), np.float32([2000]), np.ones(1, np.float32),
+                       spot_cos)
+    assert near[0] == 0, near
+
+    cam = pl.Camera.look_at((0.5, 0.5, 1.6), (0.5, 0.5, 0), size=(48, 48))   # the sheet about 40 px wide
+    lod = pl.LodSettings(threshold=(84.0, 84.0), spot_silhouettes=False)
+    got, steps = ParametricStage(s).render_list(s, cam, lod, tiers=tier_divisors(POINT_TIERS))
+    ref, ref_steps = run_lod(s, camera_record(cam), lod, tiers=tier_divisors(POINT_TIERS))
+    assert steps == ref_steps and steps[0]["promoted"] == 1, steps
+    g, r = got[sort_key(got)], ref[sort_key(ref)]
+    np.testing.assert_array_equal(g["range"], r["range"])
+    np.testing.assert_array_equal(g["flags"], r["flags"])
+    assert render_tiers(got).min() >= 1
 
 
 def test_settings_and_modes_are_checked():
