@@ -260,19 +260,21 @@ inline bool splits(const float* eu, const float* ev, const bool* mixed, float t_
 // maxima over the views that see it: eu, ev: the four u- and v-polyline lengths; mixed: the 8
 // lines (u then v) that have both bad and good samples (in some view), split like a long line;
 // mu_seg, mv_seg: their longest segments; w_u, w_v: 7 x those raised to the boundary lines' need;
-// box: the union of those views' screen bounding boxes.
+// box: the union of those views' screen bounding boxes. The step's statistics go to the work-group's
+// tally (added to the counters once, at the end of lod_step); the counts that hand out places in
+// the output (LOD_CHILDREN, the render list's length) stay atomics on the counters.
 inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const bool* mixed,
                        float mu_seg, float mv_seg, float w_u, float w_v, float4 box, ulong seen, bool back,
                        __global EvalPatch* out, uint out_cap,
                        __global RenderPatch* render, __global ulong* render_views, uint render_cap,
-                       __global uint* counters, __global uint* render_count,
+                       __global uint* counters, __global uint* render_count, uint* tally,
                        float t_u, float t_v, uint step, uint force, bool promote)
 {
     uint inst = patch.inst;
     float u0 = patch.range.x, u1 = patch.range.y, v0 = patch.range.z, v1 = patch.range.w;
-    if (seen == 0ul) { atomic_inc(&counters[LOD_CULLED]); return; }  // in every view all samples outside one clip plane
+    if (seen == 0ul) { ++tally[LOD_CULLED]; return; }  // in every view all samples outside one clip plane
     // back-facing in every view that sees it (one-sided instances only): culled, counted as such too
-    if (back) { atomic_inc(&counters[LOD_CULLED]); atomic_inc(&counters[LOD_BACKFACE]); return; }
+    if (back) { ++tally[LOD_CULLED]; ++tally[LOD_BACKFACE]; return; }
 
     bool a = split_half(eu, mixed, 0u, t_u);       // u-lines in the lower v half
     bool b = split_half(eu, mixed, 2u, t_u);       // u-lines in the upper v half
@@ -281,7 +283,7 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
     bool split = a || b || c || d;
 
     if (promote) {   // a silhouette or sub-pixel detail (lod/spot.cl): measured again at the next tier
-        atomic_inc(&counters[LOD_PROMOTED]);
+        ++tally[LOD_PROMOTED];
         uint s = atomic_add(&counters[LOD_CHILDREN], 1u);
         emit(out, s, out_cap, u0, u1, v0, v1, inst, patch.tier + 1u);
         return;
@@ -301,14 +303,14 @@ inline void lod_decide(EvalPatch patch, const float* eu, const float* ev, const 
             render[slot] = r;
             render_views[slot] = seen;
         }
-        atomic_inc(&counters[LOD_RENDERED]);
-        if (split) atomic_inc(&counters[LOD_FORCED]);
-        if (patch.tier == 1u) atomic_inc(&counters[LOD_TIER1]);
-        if (patch.tier == 2u) atomic_inc(&counters[LOD_TIER2]);
+        ++tally[LOD_RENDERED];
+        if (split) ++tally[LOD_FORCED];
+        if (patch.tier == 1u) ++tally[LOD_TIER1];
+        if (patch.tier == 2u) ++tally[LOD_TIER2];
         return;
     }
 
-    atomic_inc(&counters[LOD_SPLIT]);
+    ++tally[LOD_SPLIT];
     float mu = 0.5f * (u0 + u1), mv = 0.5f * (v0 + v1);
     if ((a || b) && (c || d)) {                 // 1:4
         uint s = atomic_add(&counters[LOD_CHILDREN], 4u);
@@ -489,6 +491,7 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
     __local float4 cone[2];
     __local float4 spot_n[SPOT_CORNERS];   // the spot check's corner normals
     __local uint spot_count;
+    uint tally[LOD_COUNTERS] = {0u};   // work-item 0's: the group's statistics (lod_decide)
     uint n_in = min(counters[(step - 1) * LOD_COUNTERS + LOD_CHILDREN], cap);
     __global uint* c = counters + step * LOD_COUNTERS;
     __global uint* render_count = counters + LOD_RENDER_TOTAL;
@@ -724,8 +727,14 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
                                   box_float((int)comb[15]), box_float((int)comb[16]));
             lod_decide(patch, eu, ev, mixed, as_float(comb[8]), as_float(comb[9]),
                        as_float(comb[10]), as_float(comb[11]), box, seen,
-                       back, out, cap, render, render_views, render_cap, c, render_count, tu, tv, step, force, promote);
+                       back, out, cap, render, render_views, render_cap, c, render_count, tally, tu, tv, step, force,
+                       promote);
         }
         // no barrier here: the next patch clears the other set of comb
     }
+    // one atomic per statistic and work-group, not one per patch: a step of the fibre curtain
+    // renders 342,000 patches, and same-address atomics serialize
+    if (l == 0u)
+        for (uint k = 0; k < LOD_COUNTERS; ++k)
+            if (tally[k]) atomic_add(&c[k], tally[k]);
 }
