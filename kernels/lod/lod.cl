@@ -487,9 +487,11 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
     // two sets, one per patch parity: work-item 0 still reads one when the others clear the next
     __local uint comb_sets[2 * COMB];
     // back-face culling: the 25 nodes' world positions and partials, the cone and sphere
-    __local float4 cnode[3 * CONE_NODES];
+    // (one element where the stage is compiled without them: local memory bounds the work-groups
+    // a compute unit holds, and a single-view step's 32 work-items hold little else)
+    __local float4 cnode[LOD_BACK_TEST ? 3 * CONE_NODES : 1];
     __local float4 cone[2];
-    __local float4 spot_n[SPOT_CORNERS];   // the spot check's corner normals
+    __local float4 spot_n[LOD_TIER_CHECKS ? SPOT_CORNERS : 1];   // the spot check's corner normals
     __local uint spot_count;
     uint tally[LOD_COUNTERS] = {0u};   // work-item 0's: the group's statistics (lod_decide)
     uint n_in = min(counters[(step - 1) * LOD_COUNTERS + LOD_CHILDREN], cap);

@@ -306,7 +306,11 @@ class LodStage:
         key = (layout, backface, tiers)
         if key not in self._step_kernels:
             group, slots = layout
-            defines = {**lod_cl_defines(), "LOD_MAX_VIEWS": MAX_VIEWS, "LOD_GROUP": group, "LOD_SLOTS": slots,
+            # the per-view local arrays as large as this layout's views can be (lod_layout: fewer
+            # slots than LOD_MAX_SLOTS only for as many views): local memory bounds the groups a
+            # compute unit holds
+            max_views = slots if slots < LOD_MAX_SLOTS else MAX_VIEWS
+            defines = {**lod_cl_defines(), "LOD_MAX_VIEWS": max_views, "LOD_GROUP": group, "LOD_SLOTS": slots,
                        "LOD_BACK_TEST": int(backface), "LOD_TIER_CHECKS": int(tiers)}
             if not cl_device().is_gpu:   # inline trigonometry in the function code (kernels/common/poly_trig.cl)
                 defines[POLY_TRIG] = 1
