@@ -49,7 +49,9 @@ class LodSettings:
     # the next tier when at least spot_share of its 189 sub-samples have normals that turn by more
     # than spot_angle (degrees) from their cell's blended corner normals
     spot_angle: float = 20.0
-    spot_share: float = 0.05
+    # 5 of 189: more than half of one cell's 9 sub-samples, so detail within one cell of the 21
+    # spread over the patch is enough (docs/hybrid.md "Why spread")
+    spot_share: float = 0.025
     # hybrid: a patch over which the surface turns away from a view (a silhouette edge) goes from
     # tier 0 to tier 1, so its edge pixels are anti-aliased (kernels/lod/spot.cl grid_silhouette)
     spot_silhouettes: bool = True

@@ -53,31 +53,32 @@ def test_glyph_fields(order, px):
 def test_hybrid_keeps_the_lobes_of_20_pixel_glyphs(order):
     """Glyphs of 20 pixels: the hybrid's finer tiers draw the thin lobes that noAA cuts short. The
     spot check's cells spread over each patch find the lobes' sub-pixel detail wherever it is
-    (measured: points hybrid 0.91 / 0.89 / 0.91, plain points 0.75 / 0.74 / 0.69; with the thesis's
-    cells in the patch's middle 0.83 / 0.83 / 0.85, most glyphs stayed in tier 1). Tess hybrid with
-    the thesis's inner levels in every tier (TessSettings.inner_measure "extent") improves on noAA
-    (0.86 / 0.50 / 0.46); with the default, the longest segment's levels in the tiers the spot
-    check sent patches to ("detail"), it reaches 0.97 / 0.95 / 0.96, and the points hybrid with
-    quad coverage agrees with it within 0.03 (0.98 / 0.94 / 0.95). That holds where both hybrids
-    take the same samples per pixel in each tier, as where the device's multisampling stops at 4
-    (llvmpipe: tess's tiers are 4xMS and 4xSS+4xMS, the points' 4xSS and 16xSS). With 8xMS (an
-    H100) the tess tiers take twice the points' samples, whose 2 x 2 subsamples put a pixel at
-    alpha 1/2 wherever an edge passes within a quarter pixel of its centre; the test then asserts
-    only that tess scores at least the points' IoU less 0.03."""
+    (measured: points hybrid 0.91 / 0.93 / 0.91, plain points 0.75 / 0.74 / 0.69; with the
+    thesis's cells in the patch's middle 0.83 / 0.83 / 0.85, most glyphs stayed in tier 1). Tess
+    hybrid with the thesis's inner levels in every tier (TessSettings.inner_measure "extent")
+    improves on noAA (0.86 / 0.50 / 0.46); with the default, the longest segment's levels in the
+    tiers the spot check sent patches to ("detail"), it reaches 0.97 / 0.97 / 0.96, and the points
+    hybrid with quad coverage agrees with it within 0.03 (0.98 / 0.96 / 0.95). That holds where
+    both hybrids take the same samples per pixel in each tier, as where the device's multisampling
+    stops at 4 (llvmpipe: tess's tiers are 4xMS and 4xSS+4xMS, the points' 4xSS and 16xSS). With
+    8xMS (an H100) the tess tiers take twice the points' samples, whose 2 x 2 subsamples put a
+    pixel at alpha 1/2 wherever an edge passes within a quarter pixel of its centre (there the
+    points with quads trailed tess by 0.065 at order 8 with the middle cells, by 0.021 now); the
+    test then asserts only that tess scores at least the points' IoU less 0.03."""
     scene, cam, ref = glyph_case(order, 20)
     points = iou_of(pl.render(scene, cam, "points", settings_for("points", "hybrid")), ref)
-    assert points >= 0.86
+    assert points >= 0.88
     noaa = iou_of(pl.render(scene, cam, "tess", settings_for("tess", "noAA")), ref)
     rs = settings_for("tess", "hybrid")
     rs.tess.inner_measure = "extent"
     extent = iou_of(pl.render(scene, cam, "tess", rs), ref)
     tess_frame = pl.render(scene, cam, "tess", settings_for("tess", "hybrid"))
     tess = iou_of(tess_frame, ref)
-    assert extent >= noaa + (0.05 if order == 4 else 0.2) and tess >= 0.93, (noaa, extent, tess)
+    assert extent >= noaa + (0.05 if order == 4 else 0.2) and tess >= 0.94, (noaa, extent, tess)
     rs = settings_for("points", "hybrid")
     rs.points.coverage = "quad"
     quads = iou_of(pl.render(scene, cam, "points", rs), ref)
-    assert quads >= 0.92
+    assert quads >= 0.94
     tess_samples = [parse_aa(t["aa"]).samples_per_pixel for t in tess_frame.stats["tiers"]]
     point_samples = [t.samples_per_pixel for t in POINT_TIERS]
     if tess_samples == point_samples:
