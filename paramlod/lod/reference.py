@@ -469,9 +469,9 @@ def spot_counts(patches, scene_inst, functions, most_u, most_v, scale, spot_cos)
     cv = ((r[:, 3] - r[:, 2]) / np.fmax(F(most_v) * scale, F(3))).astype(F)
     cu_, cv_ = cu[:, None, None], cv[:, None, None]
     # cells (i, j) spread over the patch, centred at (i + 1/2) / 7 of u and (j + 1/2) / 3 of v
-    su, sv = (r[:, 1] - r[:, 0]) * (F(1) / F(7)), (r[:, 3] - r[:, 2]) * (F(1) / F(3))
-    u0 = r[:, 0, None, None] + (np.arange(7, dtype=F) + F(0.5))[None, None, :] * su[:, None, None] - F(0.5) * cu_
-    v0 = r[:, 2, None, None] + (np.arange(3, dtype=F) + F(0.5))[None, :, None] * sv[:, None, None] - F(0.5) * cv_
+    step_u, step_v = (r[:, 1] - r[:, 0]) * (F(1) / F(7)), (r[:, 3] - r[:, 2]) * (F(1) / F(3))
+    u0 = r[:, 0, None, None] + (np.arange(7, dtype=F) + F(0.5))[None, None, :] * step_u[:, None, None] - F(0.5) * cu_
+    v0 = r[:, 2, None, None] + (np.arange(3, dtype=F) + F(0.5))[None, :, None] * step_v[:, None, None] - F(0.5) * cv_
     u0, v0 = np.broadcast_to(u0, (n, 3, 7)), np.broadcast_to(v0, (n, 3, 7))    # (n, 3 cells v, 7 cells u)
     bit_u, bit_v = np.array([0, 1, 0, 1], F), np.array([0, 0, 1, 1], F)    # spot.cl spot_corner's bits
     cu4, cv4 = cu[:, None, None, None], cv[:, None, None, None]
@@ -479,7 +479,8 @@ def spot_counts(patches, scene_inst, functions, most_u, most_v, scale, spot_cos)
                            u0[..., None] + bit_u * cu4, v0[..., None] + bit_v * cv4)    # (n, 3, 7, 4, 3)
     a = np.tile(SPOT_OFFSETS, 3)     # offset o: a = OFFSETS[o % 3], b = OFFSETS[o // 3]
     b = np.repeat(SPOT_OFFSETS, 3)
-    # sub-samples (n, 3 cells v, 7 cells u, 9 offsets)
+    # sub-samples (n, 3 cells v, 7 cells u, 9 offsets), from the cell's first corner as spot.cl
+    # computes it (u0 + 0 x cu)
     su = u0[..., None] + F(0) * cu4 + a * cu4
     sv = v0[..., None] + F(0) * cv4 + b * cv4
     ns = spot_normals(scene_inst, functions, np.broadcast_to(inst[:, None, None, None], su.shape), su, sv)
