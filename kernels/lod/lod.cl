@@ -699,20 +699,16 @@ void lod_step(__global const EvalPatch* in, __global EvalPatch* out, uint cap,
 #if LOD_GROUP == 1   // CPU devices: a cell's corners only when its sub-samples are reached
             uint mine = 0u;
             for (uint cell = 0u; cell < SPOT_SUBS / 9u && mine < spot_min; ++cell) {
-                for (uint k = 4u * cell; k < 4u * cell + 4u; ++k) {
-                    float2 c = spot_corner(patch.range, cu, cv, k);
-                    spot_n[k] = (float4)(spot_normal(func, P, I, c.x, c.y), 0.0f);
-                }
+                for (uint k = 4u * cell; k < 4u * cell + 4u; ++k)
+                    spot_n[k] = spot_corner_normal(func, P, I, patch.range, cu, cv, k);
                 for (uint k = 9u * cell; k < 9u * cell + 9u && mine < spot_min; ++k)
                     mine += spot_turns(func, P, I, patch.range, cu, cv, spot_n, k, spot_cos) ? 1u : 0u;
             }
             spot_count = mine;
 #else
             if (l == 0u) spot_count = 0u;
-            for (uint k = l; k < SPOT_CORNERS; k += LOD_GROUP) {
-                float2 c = spot_corner(patch.range, cu, cv, k);
-                spot_n[k] = (float4)(spot_normal(func, P, I, c.x, c.y), 0.0f);
-            }
+            for (uint k = l; k < SPOT_CORNERS; k += LOD_GROUP)
+                spot_n[k] = spot_corner_normal(func, P, I, patch.range, cu, cv, k);
             barrier(CLK_LOCAL_MEM_FENCE);
             // a work-item stops once its own count decides the patch (the group's is at least its
             // own); the decision, all the stage keeps of the count, is the same

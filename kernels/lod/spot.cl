@@ -44,6 +44,13 @@ inline float2 spot_corner(float4 range, float cu, float cv, uint k) {
     return (float2)(u + (float)(k & 1u) * cu, v + (float)((k >> 1) & 1u) * cv);
 }
 
+// The normal at corner k (spot_corner), as the check keeps it in local memory.
+inline float4 spot_corner_normal(uint func, __global const float* P, __global const float* I, float4 range,
+                                 float cu, float cv, uint k) {
+    float2 c = spot_corner(range, cu, cv, k);
+    return (float4)(spot_normal(func, P, I, c.x, c.y), 0.0f);
+}
+
 // Whether sub-sample s (cell s / 9, offset pair s % 9) turns from its cell's blended corner normals
 // by more than acos(spot_cos); corner normals n[SPOT_CORNERS] from spot_normal.
 inline bool spot_turns(uint func, __global const float* P, __global const float* I, float4 range,

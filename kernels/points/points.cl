@@ -121,8 +121,8 @@ inline void patch_axes(RenderPatch rp, __global const float* I, uint flags, floa
     float fv = thin_u && loop.x >= 1.0f && loop.x <= THIN_LOOP_2 ? along : factor;
     *gu = grid_axis(rp.ext.z, m.x, measure == 2u, wraps.x, fu, max_side);
     *gv = grid_axis(rp.ext.w, m.y, measure == 2u, wraps.y, fv, max_side);
-    // one line around (2 grid lines less the wrapped copy): a second on the far side, at most a
-    // pixel away, doubled the fibre curtain's samples and left its pixels and FLIP as they were
+    // thin_lines' lines around (for loops up to THIN_LOOP_1 one: a second on the far side, at most
+    // a pixel away, doubled the fibre curtain's samples and left its pixels and FLIP as they were)
     if (thin_u) { gu->n = min(gu->n, thin_lines(loop.x)); gu->na = 0u; gu->nm = 0u; gu->wrap = 1u; }
     if (thin_v) { gv->n = min(gv->n, thin_lines(loop.y)); gv->na = 0u; gv->nm = 0u; gv->wrap = 1u; }
 #if PL_QUADS
