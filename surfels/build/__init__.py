@@ -2,8 +2,9 @@
 
 Modules, each importing only those above it: ``schedule`` (sample keys and the round/level
 schedule, shared by the sampler and its twin), ``sources`` (meshes -> triangle soup), ``views``,
-``gbuffer``, ``reference`` (numpy twins), ``relax`` (the final host-side relaxation), ``sampler``
-(OpenCL; also samples scene files through ``paramlod.app.scenefile``)."""
+``raster_reference`` and ``raster`` (mesh G-buffers in OpenCL and their numpy twin), ``gbuffer``,
+``reference`` (numpy twins), ``relax`` (the final host-side relaxation), ``sampler`` (OpenCL; also
+samples scene files through ``paramlod.app.scenefile``)."""
 from paramlod.surfels.build.gbuffer import GBuffer, mesh_gbuffer, scene_gbuffer
 from paramlod.surfels.build.sampler import Sampler, sample, sample_gbuffer, sample_mesh, sample_scene
 from paramlod.surfels.build.sources import TriangleSoup, load_mesh, soup_from_trimesh

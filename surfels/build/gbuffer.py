@@ -1,16 +1,15 @@
-"""G-buffers of K orthographic views (position, normal, colour, valid mask): rasterized with
-moderngl for meshes, rendered with paramlod's point renderer for parametric scenes."""
+"""G-buffers of K orthographic views (position, normal, colour, valid mask): rasterized in
+OpenCL for meshes (raster.py), rendered with paramlod's point renderer for parametric scenes."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from paramlod import kernels
 from paramlod.core.transforms import SQUARE_LIMIT
-from paramlod.device.context import gl_context
 from paramlod.errors import SurfelError
 from paramlod.pipeline.driver import render
+from paramlod.surfels.build.raster import gbuffer_arrays
 from paramlod.surfels.build.sources import TriangleSoup
 from paramlod.surfels.build.views import ViewSet, make_views
 
@@ -60,79 +59,6 @@ class GBuffer:
         return n
 
 
-def ortho_matrix(views: ViewSet) -> np.ndarray:
-    e, n, f = views.extent, views.distance - views.extent * 1.01, views.distance + views.extent * 1.01
-    p = np.zeros((4, 4))
-    p[0, 0] = p[1, 1] = 1.0 / e
-    p[2, 2] = -2.0 / (f - n)
-    p[2, 3] = -(f + n) / (f - n)
-    p[3, 3] = 1.0
-    return p
-
-
-class MeshRasterizer:
-    """A triangle soup uploaded once, drawn into float render targets with any view/projection:
-    the corners' positions as vertices, and each triangle's corners (positions, normals, colours;
-    std430 vec4s) in a storage buffer its fragments read (kernels/surfels/surfels_gbuffer_frag.glsl)."""
-
-    def __init__(self, soup: TriangleSoup):
-        self.ctx = ctx = gl_context()
-        self.program = ctx.program(vertex_shader=kernels.source("surfels/surfels_gbuffer_vert.glsl"),
-                                   fragment_shader=kernels.source("surfels/surfels_gbuffer_frag.glsl"))
-        corners = np.zeros((soup.face_count, 9, 4), np.float32)
-        corners[:, 0:3, :3] = soup.positions
-        corners[:, 3:6, :3] = soup.normals
-        corners[:, 6:9] = soup.colors
-        self.vbo = ctx.buffer(np.ascontiguousarray(soup.positions, np.float32).tobytes())
-        self.triangles = ctx.buffer(corners.tobytes())
-        self.vao = ctx.vertex_array(self.program, [(self.vbo, "3f", "in_pos")])
-        self._fbo = None
-
-    def _targets(self, w, h):
-        if self._fbo is None or self._fbo.size != (w, h):
-            if self._fbo is not None:
-                self.release_targets()
-            ctx = self.ctx
-            self._tex = [ctx.texture((w, h), 4, dtype="f4") for _ in range(3)]
-            self._depth = ctx.depth_renderbuffer((w, h))
-            self._fbo = ctx.framebuffer(color_attachments=self._tex, depth_attachment=self._depth)
-        return self._fbo
-
-    def draw(self, view: np.ndarray, proj: np.ndarray, size, direction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(position (H, W, 4), normal (H, W, 3), colour (H, W, 4)); row 0 at the top."""
-        import moderngl
-
-        w, h = int(size[0]), int(size[1])
-        fbo = self._targets(w, h)
-        mvp = (proj @ view).astype(np.float32)
-        self.program["u_mvp"].write(np.ascontiguousarray(mvp.T).tobytes())  # GLSL is column-major
-        self.program["u_dir"].value = tuple(float(x) for x in direction)
-        self.program["u_size"].value = (float(w), float(h))
-        self.triangles.bind_to_storage_buffer(0)
-        with self.ctx.scope(fbo, enable_only=moderngl.DEPTH_TEST):
-            fbo.viewport = (0, 0, w, h)
-            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.vao.render(moderngl.TRIANGLES)
-            out = [np.frombuffer(fbo.read(components=4, attachment=i, dtype="f4"), np.float32)
-                   .reshape(h, w, 4)[::-1].copy() for i in range(3)]
-        return out[0], out[1][..., :3].copy(), out[2]
-
-    def release_targets(self):
-        for t in self._tex:
-            t.release()
-        self._depth.release()
-        self._fbo.release()
-        self._fbo = None
-
-    def release(self):
-        if self._fbo is not None:
-            self.release_targets()
-        self.vao.release()
-        self.vbo.release()
-        self.triangles.release()
-        self.program.release()
-
-
 def mesh_gbuffer(soup: TriangleSoup, views: int = 16, resolution: int = 512) -> GBuffer:
     lo, hi = soup.bounds
     span = float(np.linalg.norm(hi - lo))
@@ -141,18 +67,7 @@ def mesh_gbuffer(soup: TriangleSoup, views: int = 16, resolution: int = 512) -> 
                           "distances in float32); scale the mesh down")
     centre, radius = soup.bounding_sphere()
     vs = make_views(centre, radius, views, resolution)
-    k, n = vs.count, vs.resolution
-    pos = np.empty((k, n, n, 4), np.float32)
-    nrm = np.empty((k, n, n, 3), np.float32)
-    col = np.empty((k, n, n, 4), np.float32)
-    r = MeshRasterizer(soup)
-    try:
-        proj = ortho_matrix(vs)
-        for i in range(k):
-            pos[i], nrm[i], col[i] = r.draw(vs.view_matrix(i), proj, (n, n), vs.directions[i])
-    finally:
-        r.release()
-    g = GBuffer(vs, pos, nrm, col, soup.name)
+    g = GBuffer(vs, *gbuffer_arrays(soup, vs), soup.name)
     g.check()
     return g
 
