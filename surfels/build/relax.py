@@ -22,13 +22,14 @@ FINE = 1.25
 SPREAD = 1.05     # pairs closer than this times the mean nearest-neighbour distance repel
 OMEGA = 0.75      # fraction of a pair's overlap removed per iteration
 SAME_SIDE = 0.5   # a pixel whose normal is more than 60 deg from the surfel's lies on another sheet
-REUSE = 0.25      # the k-d tree is rebuilt once some surfel has moved this share of D since it was built
+REUSE = 0.25      # the close pairs are found again once some surfel has moved this share of D since
 
 
-def pixel_under(gbuf, x: np.ndarray, q: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For surfels at x (n, 3) on pixels q (global indices): the pixel under x in q's view and
+def pixel_under(gbuf, x: np.ndarray, q: np.ndarray, normal: np.ndarray):
+    """For surfels at x (n, 3) on pixels q (global indices): the pixel under x in q's view,
     whether it is on the surfel's sheet (covered, normal within 60 deg, x within 2 pixels of its
-    tangent plane: not an occluder or a sheet behind). A lookup in the G-buffer: O(1) a surfel."""
+    tangent plane: not an occluder or a sheet behind) and its tangent plane (``_sheet``). A
+    lookup in the G-buffer: O(1) a surfel."""
     k_, h, w = gbuf.shape
     vs = gbuf.views
     layer = q // (h * w)
@@ -38,14 +39,19 @@ def pixel_under(gbuf, x: np.ndarray, q: np.ndarray, normal: np.ndarray) -> tuple
     xi, yi = np.floor(a).astype(np.int64), np.floor(b).astype(np.int64)
     inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
     qn = np.where(inside, (layer * h + np.clip(yi, 0, h - 1)) * w + np.clip(xi, 0, w - 1), q)
-    return qn, _on_sheet(gbuf, x, qn, normal) & inside
+    ok, plane_p, plane_n = _sheet(gbuf, x, qn, normal)
+    return qn, ok & inside, plane_p, plane_n
 
 
-def _on_sheet(gbuf, x, qn, normal):
+def _sheet(gbuf, x, qn, normal):
+    """Whether the pixels qn are on the sheets of surfels at x with ``normal``, and their tangent
+    planes: positions and normals (float64), which the caller keeps where it moves the surfels."""
     gp = gbuf.position.reshape(-1, 4)[qn]
-    gn = gbuf.normal.reshape(-1, 3)[qn].astype(np.float64)
-    return ((gp[:, 3] > 0) & (np.einsum("ij,ij->i", gn, normal) > SAME_SIDE)
-            & (np.abs(np.einsum("ij,ij->i", x - gp[:, :3], gn)) <= 2.0 * gbuf.views.pixel_size))
+    plane_p = gp[:, :3].astype(np.float64)
+    plane_n = gbuf.normal.reshape(-1, 3)[qn].astype(np.float64)
+    ok = ((gp[:, 3] > 0) & (np.einsum("ij,ij->i", plane_n, normal) > SAME_SIDE)
+          & (np.abs(np.einsum("ij,ij->i", x - plane_p, plane_n)) <= 2.0 * gbuf.views.pixel_size))
+    return ok, plane_p, plane_n
 
 
 class _Nearest:
@@ -88,15 +94,14 @@ def relax(gbuf, pix: np.ndarray, iterations: int = ITERATIONS, spread: float = S
         return p, q
     nearest = _Nearest(gbuf)
     plane_p, plane_n = gpos[q, :3].astype(np.float64), gnrm[q].astype(np.float64)
-    tree, built = None, None
+    pairs, built = None, None
     for _ in range(iterations):
-        # The tree of the positions some iterations ago serves while no surfel has moved more than
-        # REUSE x D since: every pair now closer than D was closer than D + 2 x that then
-        # (building the tree was 40 % of an iteration at 100k surfels).
-        moved = np.inf if tree is None else float(np.sqrt(np.einsum("ij,ij->i", p - built, p - built).max()))
-        if moved > REUSE * D:
-            tree, built, moved = cKDTree(p), p.copy(), 0.0
-        pairs = tree.query_pairs(D + 2 * moved, output_type="ndarray")
+        # The pairs within D + 2 REUSE D of the positions some iterations ago serve while no surfel
+        # has moved more than REUSE x D since: every pair now closer than D is among them
+        # (building the tree and finding the pairs was most of an iteration at 100k surfels).
+        if pairs is None or np.einsum("ij,ij->i", p - built, p - built).max() > (REUSE * D) ** 2:
+            built = p.copy()
+            pairs = cKDTree(p).query_pairs((1 + 2 * REUSE) * D, output_type="ndarray")
         a, b = pairs[:, 0], pairs[:, 1]
         v = p[a] - p[b]
         length = np.sqrt(np.einsum("ij,ij->i", v, v))
@@ -108,13 +113,14 @@ def relax(gbuf, pix: np.ndarray, iterations: int = ITERATIONS, spread: float = S
         disp = np.stack([np.bincount(a, f[:, i], n) - np.bincount(b, f[:, i], n) for i in range(3)], 1)
         disp -= np.einsum("ij,ij->i", disp, plane_n)[:, None] * plane_n       # tangent plane only
         x = p + disp
-        qn, ok = pixel_under(gbuf, x, q, plane_n)
+        qn, ok, under_p, under_n = pixel_under(gbuf, x, q, plane_n)
         lost = np.flatnonzero(~ok)
         if len(lost):
             qn[lost] = nearest(x[lost])
-            ok[lost] = _on_sheet(gbuf, x[lost], qn[lost], plane_n[lost])
+            ok[lost], under_p[lost], under_n[lost] = _sheet(gbuf, x[lost], qn[lost], plane_n[lost])
         q = np.where(ok, qn, q)
         x = np.where(ok[:, None], x, p)                  # no pixel of its sheet under it: stay
-        plane_p, plane_n = gpos[q, :3].astype(np.float64), gnrm[q].astype(np.float64)
+        plane_p = np.where(ok[:, None], under_p, plane_p)
+        plane_n = np.where(ok[:, None], under_n, plane_n)
         p = x - np.einsum("ij,ij->i", x - plane_p, plane_n)[:, None] * plane_n    # back on the surface
     return p, q
