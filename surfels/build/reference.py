@@ -8,16 +8,8 @@ import numpy as np
 from paramlod.core.color import linear_to_srgb8_f64
 from paramlod.core.hashing import dither
 from paramlod.core.layouts import CAMERA
-from paramlod.surfels.build.schedule import (ALL_ONES, HI, compact_sort, f32_bits, handover_r2, key_pixel, key_r2,
+from paramlod.surfels.build.schedule import (ALL_ONES, HI, compact_sort, dist2, f32_bits, handover_r2, key_pixel, key_r2,
                                              level_strides, remap_keys, resume_radii, splat_r2, stop_r2, threshold_r2)
-
-
-def dist2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Squared distances in float32 in the kernel's order: (dx*dx + dy*dy) + dz*dz."""
-    a = np.asarray(a, np.float32)
-    b = np.asarray(b, np.float32)
-    d = a[..., :3] - b[..., :3]
-    return (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
 
 
 def voronoi_splat(vor, pos, samples, first, count, r2):

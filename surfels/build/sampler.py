@@ -12,8 +12,10 @@ stable scan and sort), so a run is deterministic for a given input, seed and dev
 Rounds with large radii run on point-subsampled G-buffers (strides 8, 4, 2, then 1: coarse to
 fine), and the disc splats skip 16x16 tiles that hold no covered pixel or lie out of reach
 (their 3D bounding box is farther than the radius). Both only save work: the numpy twin in
-reference.py runs the same schedule by brute force and matches bit for bit. On CPU devices step (5)
-runs on the host (numpy's stable sort: the same keys, without dozens of launches a round).
+reference.py runs the same schedule by brute force and matches bit for bit. On CPU devices steps (4)
+and (5) run on the host: the conflicts from the candidates' pairs (schedule.pair_survivors), then
+numpy's stable sort: the same keys, without a disc splat into every view and dozens of launches a
+round.
 
 The rounds fix the order; relax.py then evens out the full set on the host (sample_gbuffer's
 ``relax_iterations``), moving each surfel by a fraction of the final spacing.
@@ -37,8 +39,8 @@ from paramlod.scene.scene import Scene
 from paramlod.surfels.build.gbuffer import GBuffer, mesh_gbuffer, scene_gbuffer
 from paramlod.surfels.build.relax import auto_iterations, relax
 from paramlod.surfels.build.schedule import (HI, THRESHOLD, auto_resolution, compact_sort, handover_r2, key_pixel,
-                                             key_r2, level_strides, remap_keys, resume_radii, splat_r2, stop_r2,
-                                             threshold_r2)
+                                             key_r2, level_strides, pair_survivors, remap_keys, resume_radii, splat_r2,
+                                             stop_r2, threshold_r2)
 from paramlod.surfels.build.sources import TriangleSoup, load_mesh, soup_from_trimesh
 from paramlod.surfels.format import SurfelSet
 
@@ -103,7 +105,7 @@ class Sampler:
     """Device state of one sampling run; the passes are methods so that tests can check each."""
 
     def __init__(self, gbuf: GBuffer, target: int, seed: int = 0, threshold: float = THRESHOLD,
-                 host_sort: bool | None = None):
+                 host_survivors: bool | None = None):
         import pyopencl as cl
         import pyopencl.array as cla
 
@@ -123,10 +125,12 @@ class Sampler:
         self.frame = (*[np.float32(x) for x in vs.centre], np.float32(vs.scale))
         self.scale = float(np.float32(vs.scale))
         dev = cl_device()
-        # Compact and sort the survivors on the host on CPU devices: there pyopencl's scan and radix
-        # sort are dozens of launches a round (most of a round's time at small counts), while the
-        # survivor array is small. Same result either way (a stable sort of the same keys).
-        self.host_sort = (not dev.is_gpu) if host_sort is None else bool(host_sort)
+        # Find the survivors on the host on CPU devices: conflicts from the candidates' pairs
+        # (schedule.pair_survivors; the discs' splats into every view were half of a 100k run on
+        # two cores), then compaction and sort (pyopencl's scan and radix sort are dozens of launches
+        # a round there). The same survivors either way.
+        self.host_survivors = (not dev.is_gpu) if host_survivors is None else bool(host_survivors)
+        self.eligible = 0   # candidates of the last round that passed the radius threshold
         self.q = q = dev.queue
         prog = build(["surfels/surfels_sample.cl"])
         self.k = {name: cl.Kernel(prog, name) for name in
@@ -138,7 +142,7 @@ class Sampler:
         self.tiles_dev = tuple(cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in (lo, hi))
         self.tile_grid = (lo.shape[2], lo.shape[1])
         self.vor = cla.empty(q, self.n_pix, np.uint64)
-        self.conf = cla.empty(q, self.n_pix, np.uint64)
+        self.conf = None if self.host_survivors else cla.empty(q, self.n_pix, np.uint64)   # device conflicts
         self.samples = cla.zeros(q, target, np.uint64)
         self.cand = cla.zeros(q, target, np.uint64)
         self.counters = cla.zeros(q, SAMPLER_COUNTER.length, np.uint32)
@@ -193,20 +197,25 @@ class Sampler:
                                  *self.geom, self.layers, *self.frame, *self.tiles_dev, self.cand.data,
                                  np.uint32(n), np.float32(thr2), np.uint32(tiles), self.conf.data)
 
-    def survivors(self, thr2):
-        """Surviving candidate keys, compacted in site order and sorted by decreasing radius."""
+    def survivors(self, thr2, r2max):
+        """Surviving candidate keys of this round, compacted in site order and sorted by
+        decreasing radius, and their count; sets ``eligible``."""
         import pyopencl.array as cla
         from pyopencl.algorithm import copy_if
 
         n = self.n
+        if self.host_survivors:
+            out, self.eligible = pair_survivors(self.cand[:n].get(), self.pos_host, thr2)
+            srt = compact_sort(out)
+            keys = cla.empty(self.q, max(len(srt), 1), np.uint64)
+            if len(srt):
+                keys[:len(srt)].set(srt)
+            return keys, len(srt)
+        self.conflicts(thr2, r2max)
         out = cla.empty(self.q, n, np.uint64)
         self.k["survive"](self.q, (_round_up(n, LOCAL),), (LOCAL,), self.cand.data, np.uint32(n), np.float32(thr2),
                           self.conf.data, out.data, self.counters.data)
-        if self.host_sort:
-            srt = compact_sort(out.get())
-            if len(srt):
-                out[:len(srt)].set(srt)
-            return out, len(srt)
+        self.eligible = int(self.counters.get()[SAMPLER_COUNTER.offset("eligible")])
         packed, count, _ = copy_if(out, "ary[i] != 0", queue=self.q)
         m = int(count.get())
         if m == 0:
@@ -253,16 +262,14 @@ class Sampler:
             if self.n >= self.target or not r2max > stop_r2:
                 break
             thr2 = threshold_r2(r2max, self.threshold)
-            self.conflicts(thr2, r2max)
-            keys, m = self.survivors(thr2)
+            keys, m = self.survivors(thr2, r2max)
             take = min(m, self.target - self.n)
             if take == 0:
                 break
             first = self.append(keys, take)
             self.splat_voronoi(first, take, splat_r2(r2max))
             self.q.finish()
-            eligible = int(self.counters.get()[SAMPLER_COUNTER.offset("eligible")])
-            self.rounds.append(RoundStats(len(self.rounds) + 1, first, eligible, m, take,
+            self.rounds.append(RoundStats(len(self.rounds) + 1, first, self.eligible, m, take,
                                           float(np.sqrt(r2max)), (time.perf_counter() - t0) * 1e3))
             if progress is not None:
                 progress(self.n, float(np.sqrt(r2max)))

@@ -33,6 +33,14 @@ def key_pixel(key) -> np.ndarray:
     return (np.asarray(key, np.uint64) & np.uint64(0xFFFFFFFF)).astype(np.int64)
 
 
+def dist2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared distances in float32 in the kernels' order: (dx*dx + dy*dy) + dz*dz."""
+    a = np.asarray(a, np.float32)
+    b = np.asarray(b, np.float32)
+    d = a[..., :3] - b[..., :3]
+    return (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
+
+
 # --- rounds -------------------------------------------------------------------------------------
 def threshold_r2(r2max, fraction=THRESHOLD) -> np.float32:
     return np.float32(r2max) * np.float32(fraction * fraction)
@@ -40,6 +48,34 @@ def threshold_r2(r2max, fraction=THRESHOLD) -> np.float32:
 
 def splat_r2(r2max, slack=SPLAT_SLACK) -> np.float32:
     return np.float32(r2max) * np.float32(slack)
+
+
+def pair_survivors(cand: np.ndarray, pos: np.ndarray, thr2) -> tuple[np.ndarray, int]:
+    """The conflict removal of one round from the candidates' pairs: (the survivors' keys in site
+    order, 0 for the others; the eligible count). Candidate B is dropped when an eligible A with
+    a larger key has B's pixel strictly inside its disc (float32 dist2 < A's squared radius):
+    exactly the pixels A's conflict_splat reaches, so the same survivors as conflict_splat +
+    survive (the twin's and the kernels') without splatting a disc into every view. ``pos``: the
+    G-buffer's positions (float32 (pixels, 4)); a k-d tree finds the pairs, then the exact test."""
+    from scipy.spatial import cKDTree
+
+    r2 = key_r2(cand)
+    ok = (r2 >= np.float32(thr2)) & (r2 > 0)
+    idx = np.flatnonzero(ok)
+    out = np.zeros(len(cand), np.uint64)
+    if not len(idx):
+        return out, 0
+    keys, r2k = cand[idx], r2[idx]
+    p = pos[key_pixel(keys), :3]
+    # float64 distances within the largest radius, widened past float32 rounding of dist2
+    reach = float(np.sqrt(np.float64(r2k.max()))) * (1 + 1e-5)
+    i, j = cKDTree(p.astype(np.float64)).query_pairs(reach, output_type="ndarray").T
+    d2 = dist2(p[i], p[j])
+    dropped = np.zeros(len(idx), bool)
+    dropped[j[(keys[i] > keys[j]) & (d2 < r2k[i])]] = True
+    dropped[i[(keys[j] > keys[i]) & (d2 < r2k[j])]] = True
+    out[idx[~dropped]] = keys[~dropped]
+    return out, len(idx)
 
 
 def compact_sort(out: np.ndarray) -> np.ndarray:

@@ -11,7 +11,8 @@ from paramlod.surfels.build import (Sampler, mesh_gbuffer, sample_gbuffer, sampl
                                     soup_from_trimesh)
 from paramlod.surfels.build import reference as ref  # noqa: E402
 from paramlod.surfels.build.sampler import run_levels  # noqa: E402
-from paramlod.surfels.build.schedule import level_strides, remap_keys, splat_r2, threshold_r2  # noqa: E402
+from paramlod.surfels.build.schedule import (level_strides, pair_survivors, remap_keys, splat_r2,  # noqa: E402
+                                             threshold_r2)
 
 
 def two_parts():
@@ -27,11 +28,11 @@ def small_gbuf():
     return mesh_gbuffer(two_parts(), views=4, resolution=24)
 
 
-@pytest.mark.parametrize("host_sort", [True, False], ids=["host-sort", "device-sort"])
-def test_every_pass_matches_numpy(small_gbuf, host_sort):
-    # CPU devices compact and sort the survivors on the host, GPUs with copy_if + radix sort: both
-    # must give the twin's keys
-    s = Sampler(small_gbuf, 400, seed=3, host_sort=host_sort)
+@pytest.mark.parametrize("host", [True, False], ids=["host-survivors", "device-survivors"])
+def test_every_pass_matches_numpy(small_gbuf, host):
+    # CPU devices find the survivors on the host (conflicts from the candidates' pairs, compaction
+    # and sort), GPUs with the disc splats, copy_if and radix sort: both must give the twin's keys
+    s = Sampler(small_gbuf, 400, seed=3, host_survivors=host)
     pos = s.pos_host
     s.start()
     seed = s.seed_pixel()
@@ -47,10 +48,11 @@ def test_every_pass_matches_numpy(small_gbuf, host_sort):
         assert mx == cand.max()
         r2max = ref.key_r2(mx)
         thr2 = threshold_r2(r2max)
-        s.conflicts(thr2, r2max)
         conf = ref.conflict_splat(pos, cand, thr2)
-        assert np.array_equal(s.conf.get(), conf), f"conflict removal, round {rnd}"
-        keys, m = s.survivors(thr2)
+        if not host:
+            s.conflicts(thr2, r2max)
+            assert np.array_equal(s.conf.get(), conf), f"conflict removal, round {rnd}"
+        keys, m = s.survivors(thr2, r2max)
         srt = ref.compact_sort(ref.survive(cand, thr2, conf))
         assert m == len(srt) > 0
         assert np.array_equal(keys.get()[:m], srt), f"compact and sort, round {rnd}"
@@ -65,6 +67,33 @@ def test_every_pass_matches_numpy(small_gbuf, host_sort):
         s.splat_voronoi(first, m, splat_r2(r2max))
         vor = ref.voronoi_splat(vor, pos, samples, first, m, splat_r2(r2max))
         assert np.array_equal(s.vor.get(), vor), f"Voronoi, round {rnd}"
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_pair_survivors_are_the_splats_survivors(seed):
+    """Conflicts from the candidates' pairs (the CPU path) keep exactly the candidates that own
+    their pixel after the twin's disc splats, also with equal radii and candidates at the edge of
+    a disc."""
+    rng = np.random.default_rng(seed)
+    pos = np.zeros((3000, 4), np.float32)
+    pos[:, :3] = rng.random((3000, 3)) * np.float32(4.0)
+    pos[::3, 3] = 1.0
+    covered = np.flatnonzero(pos[:, 3] > 0)
+    pix = rng.choice(covered, 400, replace=False)
+    r2 = rng.choice(np.float32([0.0, 0.1, 0.2, 0.2, 0.3]), 400).astype(np.float32)
+    # candidates 20-39 lie exactly on the edge of the discs of 0-19, whose keys are larger: they
+    # are outside (strictly inside drops)
+    for a in range(20):
+        d2 = ref.dist2(pos[covered], pos[pix[a]])
+        d2[np.isin(covered, pix) | (d2 < 0.12)] = np.inf
+        pix[20 + a] = covered[np.argmin(d2)]
+        r2[a], r2[20 + a] = d2.min(), 0.1
+    cand = (ref.f32_bits(r2) << np.uint64(32)) | pix.astype(np.uint64)
+    thr2 = np.float32(0.1)
+    expect = ref.survive(cand, thr2, ref.conflict_splat(pos, cand, thr2))
+    out, eligible = pair_survivors(cand, pos, thr2)
+    assert np.array_equal(out, expect)
+    assert eligible == int(np.sum(r2 >= thr2)) and 0 < np.count_nonzero(out) < eligible
 
 
 def test_whole_run_matches_numpy(small_gbuf):
