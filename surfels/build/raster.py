@@ -45,7 +45,7 @@ class _Raster:
         self.ctx, self.q = dev.context, dev.queue
         self.prog = build(["surfels/surfels_raster.cl"], defines={"SR_SUBPIXEL_BITS": SUBPIXEL_BITS},
                           options=EXACT_DIVISION)
-        self.soup, self.views, self.n_pix = soup, views, k * res * res
+        self.n_pix = k * res * res
         self.corners = self.upload(soup.positions)
         self.mats = self.upload(view_matrices(views))
         self.keys = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, self.n_pix * 8)
