@@ -1,6 +1,7 @@
 """What the sampler (sampler.py, on the device) and its numpy twin (reference.py) share: the
 64-bit sample key (float32 squared radius << 32 | pixel index) and the round and level schedule.
-Pure numpy, so the twin runs without a device; both import it, neither imports the other."""
+Host code only (numpy; scipy's k-d tree for pair_survivors), so the twin runs without a device;
+both import it, neither imports the other."""
 from __future__ import annotations
 
 import numpy as np
