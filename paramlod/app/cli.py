@@ -11,6 +11,7 @@ from pathlib import Path
 from paramlod.app import dist, gallery, glyphs, mesh_cmd, scenefile, surfels_cmd, views_cmd
 from paramlod.app.args import (Parser, add_size, add_stats, check_outputs, install_warning_format, positive_int, progress,
                                run_reporting_errors, write_all_or_none)
+from paramlod.app.bench import run as bench
 from paramlod.device import context as device_context
 from paramlod.core.files import write_atomically
 from paramlod.core.frame import stats_aa
@@ -147,22 +148,7 @@ def cmd_functions(args) -> int:
     return 0
 
 
-def named_command(argv) -> str | None:
-    """The subcommand a command line names: its first word that is not a global option or the
-    value of one (None: none, e.g. ``paramlod --help``)."""
-    words = iter(argv)
-    for word in words:
-        if word in ("--cl-device", "--functions"):
-            next(words, None)
-        elif not word.startswith("-"):
-            return word
-    return None
-
-
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The command line's parser. With ``command`` (the subcommand the command line names) the
-    bench's arguments are added only when it is "bench": the bench imports the built-in SH glyphs
-    (sympy), trimesh and scipy, over a second of every other command's start on a laptop's CPU."""
+def build_parser() -> argparse.ArgumentParser:
     p = Parser(prog="paramlod", description=__doc__)
     p.add_argument("--cl-device", help="OpenCL device by name substring (or PARAMLOD_CL_DEVICE)")
     p.add_argument("--functions", action="append", metavar="DIR",
@@ -226,11 +212,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     f.set_defaults(func=cmd_functions)
 
     b = sub.add_parser("bench", help="measure LOD and render times")
-    if command in (None, "bench"):
-        from paramlod.app.bench import run as bench
-
-        bench.add_arguments(b)
-        b.set_defaults(func=bench.run_bench)
+    bench.add_arguments(b)
+    b.set_defaults(func=bench.run_bench)
 
     bs = sub.add_parser("bench-scale", help="frames per second of an animation against the Dask worker count "
                                             "(docs/scale-out.md)")
@@ -249,8 +232,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     install_warning_format()   # a warning is one line naming the input, not paramlod's source line
-    argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser(named_command(argv)).parse_args(argv)
+    args = build_parser().parse_args(argv)
 
     def run() -> int:
         if args.cl_device:

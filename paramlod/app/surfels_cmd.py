@@ -16,6 +16,8 @@ from paramlod.app import dist
 from paramlod.app.args import add_output, add_size, add_stats, parse_vec3, run_reporting_errors
 from paramlod.core.camera import Camera
 from paramlod.errors import SurfelError
+from paramlod.surfels.build.sampler import sample
+from paramlod.surfels.build.schedule import auto_resolution
 from paramlod.surfels.format import SurfelSet
 from paramlod.surfels.render import FixedCount, FixedSize, default_camera, render_surfels, up_axis
 
@@ -41,8 +43,6 @@ def _check_output(path: Path):
 
 
 def cmd_sample(args) -> int:
-    from paramlod.surfels.build.sampler import sample   # imports scipy: only for the command that samples
-
     if len(args.source) > 1 or dist.job_requested(args):
         return cmd_sample_job(args)
     out = Path(args.output)
@@ -62,8 +62,6 @@ def cmd_sample(args) -> int:
 
 def sample_file(source: str, out: str, count: int, views: int, resolution: int, seed: int) -> dict:
     """The task of a sampling job (paramlod.app.dist): one mesh or scene file sampled into ``out``."""
-    from paramlod.surfels.build.sampler import sample
-
     with warnings.catch_warnings():   # "only k of n surfels" is in the file's meta (requested vs. length)
         warnings.simplefilter("ignore")
         s = sample(source, count, views=views, resolution=resolution, seed=seed, progress=False)
@@ -80,8 +78,6 @@ class SampledWith:
     seed: int
 
     def __call__(self, path) -> bool:
-        from paramlod.surfels.build.schedule import auto_resolution
-
         try:
             m = SurfelSet.load(path).meta
         except SurfelError:

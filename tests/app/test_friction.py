@@ -12,7 +12,6 @@ import pytest
 from paramlod.app import surfels_cmd
 from paramlod.app.cli import build_parser, main
 from paramlod.app.glyphs import glyph_frame
-from paramlod.surfels.build import sampler
 from paramlod.surfels.format import SurfelSet
 from paramlod.surfels.render import FixedCount, default_camera, principal_frame, render_surfels, up_axis
 
@@ -170,7 +169,7 @@ def test_surfels_sample_refuses_a_non_surfels_output_before_sampling(tmp_path, c
     def no_sampling(*a, **k):
         raise AssertionError("sampled before checking -o")
 
-    monkeypatch.setattr(sampler, "sample", no_sampling)   # surfels_cmd imports it when it samples
+    monkeypatch.setattr(surfels_cmd, "sample", no_sampling)
     monkeypatch.setattr(surfels_cmd, "sample_file", no_sampling)
     mesh = str(GALLERY / "data" / "bunny.ply")
     for argv in (["surfels", "sample", mesh, "-n", "100", "-o", str(tmp_path / name)],
