@@ -14,7 +14,8 @@ Host code only (no kernel, so no twin); deterministic: exact cKDTree queries, su
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from paramlod.surfels.build.schedule import kd_tree
 
 ITERATIONS = 16   # iterations for G-buffers of at least FINE x sqrt(n) pixels a side
 COARSE_ITERATIONS = 24   # below that the surfels start nearer the pixel grid and need more
@@ -64,7 +65,7 @@ class _Nearest:
     def __call__(self, x):
         if self.tree is None:
             self.index = np.flatnonzero(self.gbuf.valid.reshape(-1))
-            self.tree = cKDTree(self.gbuf.position.reshape(-1, 4)[self.index, :3])
+            self.tree = kd_tree(self.gbuf.position.reshape(-1, 4)[self.index, :3])
         return self.index[self.tree.query(x)[1]]
 
 
@@ -88,7 +89,7 @@ def relax(gbuf, pix: np.ndarray, iterations: int = ITERATIONS, spread: float = S
     n = len(p)
     if n < 3 or iterations <= 0:
         return p, q
-    d, _ = cKDTree(p).query(p, k=2)
+    d, _ = kd_tree(p).query(p, k=2)
     D = spread * float(np.mean(d[:, 1]))
     if not D > 0:
         return p, q
@@ -101,7 +102,7 @@ def relax(gbuf, pix: np.ndarray, iterations: int = ITERATIONS, spread: float = S
         # (building the tree and finding the pairs was most of an iteration at 100k surfels).
         if pairs is None or np.einsum("ij,ij->i", p - built, p - built).max() > (REUSE * D) ** 2:
             built = p.copy()
-            pairs = cKDTree(p).query_pairs((1 + 2 * REUSE) * D, output_type="ndarray")
+            pairs = kd_tree(p).query_pairs((1 + 2 * REUSE) * D, output_type="ndarray")
         a, b = pairs[:, 0], pairs[:, 1]
         v = p[a] - p[b]
         length = np.sqrt(np.einsum("ij,ij->i", v, v))

@@ -51,6 +51,14 @@ def splat_r2(r2max, slack=SPLAT_SLACK) -> np.float32:
     return np.float32(r2max) * np.float32(slack)
 
 
+def kd_tree(points):
+    """scipy's cKDTree of ``points``. scipy.spatial is imported on first use: importing it took
+    0.4 s, which every start of the command line paid (the CLI imports the sampler)."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points)
+
+
 def pair_survivors(cand: np.ndarray, pos: np.ndarray, thr2) -> tuple[np.ndarray, int]:
     """The conflict removal of one round from the candidates' pairs: (the survivors' keys in site
     order, 0 for the others; the eligible count). Candidate B is dropped when an eligible A with
@@ -58,8 +66,6 @@ def pair_survivors(cand: np.ndarray, pos: np.ndarray, thr2) -> tuple[np.ndarray,
     exactly the pixels A's conflict_splat reaches, so the same survivors as conflict_splat +
     survive (the twin's and the kernels') without splatting a disc into every view. ``pos``: the
     G-buffer's positions (float32 (pixels, 4)); a k-d tree finds the pairs, then the exact test."""
-    from scipy.spatial import cKDTree
-
     r2 = key_r2(cand)
     ok = (r2 >= np.float32(thr2)) & (r2 > 0)
     idx = np.flatnonzero(ok)
@@ -70,7 +76,7 @@ def pair_survivors(cand: np.ndarray, pos: np.ndarray, thr2) -> tuple[np.ndarray,
     p = pos[key_pixel(keys), :3]
     # float64 distances within the largest radius, widened past float32 rounding of dist2
     reach = float(np.sqrt(np.float64(r2k.max()))) * (1 + 1e-5)
-    i, j = cKDTree(p.astype(np.float64)).query_pairs(reach, output_type="ndarray").T
+    i, j = kd_tree(p.astype(np.float64)).query_pairs(reach, output_type="ndarray").T
     d2 = dist2(p[i], p[j])
     dropped = np.zeros(len(idx), bool)
     dropped[j[(keys[i] > keys[j]) & (d2 < r2k[i])]] = True

@@ -38,8 +38,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
-import trimesh
 
 from paramlod.app.args import parse_size, positive_float, positive_int
 from paramlod.app.bench.scenes import apply_variant_settings
@@ -506,6 +504,8 @@ def evenness(points, area: float) -> dict:
     pts = np.asarray(points, np.float64)
     if len(pts) < 2:
         raise ParamlodError(f"evenness: needs at least 2 points, got {len(pts)}")
+    from scipy.spatial import cKDTree   # scipy and trimesh on first use: every command line imports the bench
+
     d, _ = cKDTree(pts).query(pts, k=2)
     nn = d[:, 1]
     hexd = math.sqrt(2 * area / (math.sqrt(3) * len(pts)))
@@ -667,6 +667,8 @@ def run_peers(args, out_dir, log=print) -> dict:
         result["matched_rounds"] = [matched(rows) for rows in per_round]
     result["matched"] = matched(result["render"])
     if bunny is not None:
+        import trimesh   # on first use, as scipy in ``evenness``
+
         path = bunny
         area = float(trimesh.load(path, force="mesh").area)
         if "paramlod" in tools:
