@@ -4,7 +4,7 @@ raster_reference (the same keys, bit for bit).
 
 On the 2-core development machine (PoCL) the 16 views of the 100k-triangle bunny take about
 0.06 s at 128 px and 0.1 s at 512 px, where Mesa's llvmpipe drew them in 0.35 and 0.45 s
-(its triangle setup runs on one thread per draw); on a GPU either is a few milliseconds.
+(its triangle setup runs on one thread per draw). Not measured on a GPU yet.
 A work-item walks its triangle's whole bounding box, so a mesh of few triangles, each covering
 much of a view, rasterizes serially on a GPU; scans and CAD meshes at the sampler's resolutions
 stay fast.
