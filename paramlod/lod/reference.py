@@ -479,10 +479,9 @@ def spot_counts(patches, scene_inst, functions, most_u, most_v, scale, spot_cos)
                            u0[..., None] + bit_u * cu4, v0[..., None] + bit_v * cv4)    # (n, 3, 7, 4, 3)
     a = np.tile(SPOT_OFFSETS, 3)     # offset o: a = OFFSETS[o % 3], b = OFFSETS[o // 3]
     b = np.repeat(SPOT_OFFSETS, 3)
-    # sub-samples (n, 3 cells v, 7 cells u, 9 offsets), from the cell's first corner as spot.cl
-    # computes it (u0 + 0 x cu)
-    su = u0[..., None] + F(0) * cu4 + a * cu4
-    sv = v0[..., None] + F(0) * cv4 + b * cv4
+    # sub-samples (n, 3 cells v, 7 cells u, 9 offsets), from the cell's first corner
+    su = u0[..., None] + a * cu4
+    sv = v0[..., None] + b * cv4
     ns = spot_normals(scene_inst, functions, np.broadcast_to(inst[:, None, None, None], su.shape), su, sv)
     n00, n10, n01, n11 = (corners[:, :, :, None, c] for c in range(4))
     w = lambda x: x[..., None]   # noqa: E731  (weights over the vector axis)

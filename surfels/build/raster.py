@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pyopencl as cl
 
 from paramlod.device.context import cl_device
 from paramlod.device.programs import build
@@ -32,43 +33,41 @@ def _round_up(n: int, m: int) -> int:
 
 
 class _Raster:
-    """The soup's corners and the views' matrices on the device, the program, and the keys of
-    gbuffer_raster (enqueued, not waited for)."""
+    """The program and the soup's corners on the device, uploaded once; ``keys`` enqueues
+    gbuffer_raster for some views (not waited for)."""
 
-    def __init__(self, soup: TriangleSoup, views: ViewSet):
-        import pyopencl as cl
-
-        f, k, res = soup.face_count, views.count, views.resolution
-        if f >= 0xFFFFFFFF:
-            raise SurfelError(f"mesh '{soup.name}' has {f} triangles; the G-buffer keys hold at most {0xFFFFFFFE}")
+    def __init__(self, soup: TriangleSoup):
+        if soup.face_count >= 0xFFFFFFFF:
+            raise SurfelError(f"mesh '{soup.name}' has {soup.face_count} triangles; the G-buffer keys hold at most "
+                              f"{0xFFFFFFFE}")
         dev = cl_device()
         self.ctx, self.q = dev.context, dev.queue
         self.prog = build(["surfels/surfels_raster.cl"], defines={"SR_SUBPIXEL_BITS": SUBPIXEL_BITS},
                           options=EXACT_DIVISION)
-        self.n_pix = k * res * res
+        self.faces = soup.face_count
         self.corners = self.upload(soup.positions)
-        self.mats = self.upload(view_matrices(views))
-        self.keys = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, self.n_pix * 8)
-        cl.enqueue_fill_buffer(self.q, self.keys, np.uint64(0xFFFFFFFFFFFFFFFF), 0, self.n_pix * 8)
-        cl.Kernel(self.prog, "gbuffer_raster")(self.q, (_round_up(f, LOCAL), k), (LOCAL, 1), self.corners,
-                                               np.uint32(f), self.mats, np.uint32(res), self.keys)
 
-    def upload(self, a: np.ndarray):
-        import pyopencl as cl
-
+    def upload(self, a: np.ndarray) -> cl.Buffer:
         return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                          hostbuf=np.ascontiguousarray(a, np.float32))
+
+    def keys(self, views: ViewSet) -> tuple[cl.Buffer, cl.Buffer]:
+        """(the keys of ``views``, their matrices on the device)."""
+        k, res = views.count, views.resolution
+        mats = self.upload(view_matrices(views))
+        keys = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, k * res * res * 8)
+        cl.enqueue_fill_buffer(self.q, keys, np.uint64(0xFFFFFFFFFFFFFFFF), 0, k * res * res * 8)
+        cl.Kernel(self.prog, "gbuffer_raster")(self.q, (_round_up(self.faces, LOCAL), k), (LOCAL, 1), self.corners,
+                                               np.uint32(self.faces), mats, np.uint32(res), keys)
+        return keys, mats
 
 
 def gbuffer_keys(soup: TriangleSoup, views: ViewSet) -> np.ndarray:
     """uint64 (K, R, R): depth bits << 32 | triangle of every covered pixel centre, all ones
     elsewhere (twin: raster_reference.raster_keys)."""
-    import pyopencl as cl
-
-    r = _Raster(soup, views)
-    res = views.resolution
-    keys = np.empty((views.count, res, res), np.uint64)
-    cl.enqueue_copy(r.q, keys, r.keys)
+    r = _Raster(soup)
+    keys = np.empty((views.count, views.resolution, views.resolution), np.uint64)
+    cl.enqueue_copy(r.q, keys, r.keys(views)[0])
     return keys
 
 
@@ -76,23 +75,23 @@ def gbuffer_arrays(soup: TriangleSoup, views: ViewSet):
     """(position (K, R, R, 4), normal (K, R, R, 3), colour (K, R, R, 4)) of the soup in the views,
     as GBuffer holds them (twin: raster_reference.resolve of the keys). Views go to the device a
     few at a time, so that no buffer outgrows CHUNK_BYTES."""
-    import pyopencl as cl
-
     k, res = views.count, views.resolution
     arrays = (np.empty((k, res, res, 4), np.float32), np.empty((k, res, res, 3), np.float32),
               np.empty((k, res, res, 4), np.float32))
+    r = _Raster(soup)
+    normals, colors = r.upload(soup.normals), r.upload(soup.colors)
+    resolve = cl.Kernel(r.prog, "gbuffer_resolve")
     per = max(1, min(CHUNK_BYTES, cl_device().device.max_mem_alloc_size) // (res * res * 16))
     for first in range(0, k, per):
         part = slice(first, min(k, first + per))
         chunk = replace(views, directions=views.directions[part], rights=views.rights[part], ups=views.ups[part])
-        r = _Raster(soup, chunk)
+        keys, mats = r.keys(chunk)
+        n_pix = chunk.count * res * res
         # the device writes into the host's arrays where it can (CPU devices: no second copy)
         host = [a[part] for a in arrays]
         outs = [cl.Buffer(r.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=a) for a in host]
-        cl.Kernel(r.prog, "gbuffer_resolve")(r.q, (_round_up(r.n_pix, LOCAL),), (LOCAL,), r.keys,
-                                             np.uint32(r.n_pix), np.uint32(res), r.mats,
-                                             r.upload(chunk.directions), r.corners, r.upload(soup.normals),
-                                             r.upload(soup.colors), *outs)
+        resolve(r.q, (_round_up(n_pix, LOCAL),), (LOCAL,), keys, np.uint32(n_pix), np.uint32(res), mats,
+                r.upload(chunk.directions), r.corners, normals, colors, *outs)
         for a, b in zip(host, outs):
             cl.enqueue_copy(r.q, a, b)
     return arrays

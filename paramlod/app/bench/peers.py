@@ -51,6 +51,7 @@ from paramlod.pipeline.driver import render
 from paramlod.pipeline.settings import RenderSettings
 from paramlod.scene.scene import Material, Scene
 from paramlod.surfels.build import sample_mesh
+from paramlod.surfels.build.schedule import kd_tree
 
 # tool -> (module to import, distributions to report the version of, pip command, what it does here)
 PEERS = {
@@ -504,9 +505,7 @@ def evenness(points, area: float) -> dict:
     pts = np.asarray(points, np.float64)
     if len(pts) < 2:
         raise ParamlodError(f"evenness: needs at least 2 points, got {len(pts)}")
-    from scipy.spatial import cKDTree   # scipy and trimesh on first use: every command line imports the bench
-
-    d, _ = cKDTree(pts).query(pts, k=2)
+    d, _ = kd_tree(pts).query(pts, k=2)
     nn = d[:, 1]
     hexd = math.sqrt(2 * area / (math.sqrt(3) * len(pts)))
     return {"min": float(nn.min() / hexd), "mean": float(nn.mean() / hexd), "cv": float(nn.std() / nn.mean())}
@@ -667,7 +666,7 @@ def run_peers(args, out_dir, log=print) -> dict:
         result["matched_rounds"] = [matched(rows) for rows in per_round]
     result["matched"] = matched(result["render"])
     if bunny is not None:
-        import trimesh   # on first use, as scipy in ``evenness``
+        import trimesh   # on first use: every command line imports the bench
 
         path = bunny
         area = float(trimesh.load(path, force="mesh").area)
