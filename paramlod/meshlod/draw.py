@@ -64,7 +64,7 @@ VIEWS_PER_DRAW = 16
 VIEW_RECORD = 2 * 16 * 4   # std140 PlView (kernels/meshlod/mesh_common.glsl): view, proj matrices
 
 
-def _program(ctx, color_by: int, views_per_draw: int = 0):
+def draw_program(ctx, color_by: int, views_per_draw: int = 0):
     """The draw program for debug colouring ``color_by`` (and ``views_per_draw`` geometry-stage
     invocations for a multi-view draw; 0: the one-view program), cached with the GL context."""
     programs = gl_cache(ctx).setdefault("meshlod_draw_programs", {})
@@ -331,7 +331,7 @@ class MeshDraw:
         eff = aa_[1]
         ctx = self.ctx
         t0 = time.perf_counter()
-        prog = _program(ctx, int(color_by))
+        prog = draw_program(ctx, int(color_by))
         w, h = camera.size
         tg, self._targets = self._targets, None   # not kept when making new ones fails
         tg = self._targets = targets_for(tg, ctx, (w, h), eff.ss, eff.msaa, "mesh draw")
@@ -381,7 +381,7 @@ class MeshDraw:
         n_views = len(views)
         per_draw = min(n_views, VIEWS_PER_DRAW)
         t0 = time.perf_counter()
-        prog = _program(ctx, int(color_by), per_draw)
+        prog = draw_program(ctx, int(color_by), per_draw)
         w, h = views.size
         tg, self._layered = self._layered, None   # not kept when making new ones fails
         tg = self._layered = targets_for(tg, ctx, (w, h), eff.ss, eff.msaa, "multi-view mesh draw", layers=n_views)

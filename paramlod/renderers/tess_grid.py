@@ -17,7 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
-import pyopencl.array as cla
 import pyopencl.cltypes as cltypes
 
 from paramlod.core.layouts import GRID_VERTEX
@@ -35,6 +34,10 @@ VERTICES, TRIANGLES = LEVELS.index("vertices"), LEVELS.index("triangles")
 # most vertices one list may make (32 bytes each: 2 GiB); more is an error that names the way out
 MAX_VERTICES = 1 << 26
 LOCAL_SIZE = 64
+# grid_levels' work-group on CPU devices: a patch's levels take 80-128 evaluations, and a few
+# hundred patches in groups of 64 leave a core idle for the last group (the close-up torus of the
+# peers bench, 141 patches, 2-core AMD EPYC, PoCL: 0.9-1.0 ms in groups of 64, 0.65-0.69 in 16)
+CPU_LEVELS_LOCAL = 16
 
 
 @dataclass
@@ -59,6 +62,11 @@ def level_rule(settings, threshold) -> tuple[tuple, int]:
     return (L, L, float(threshold[0]), float(threshold[1])), 1
 
 
+def _input(ctx, a: np.ndarray, flags=cl.mem_flags.READ_ONLY) -> cl.Buffer:
+    """A device buffer holding a copy of the host array ``a`` (made with it: no queued transfer)."""
+    return cl.Buffer(ctx, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=a)
+
+
 def starts(counts: np.ndarray) -> np.ndarray:
     """uint32 first index of each patch's run and the total, of per-patch ``counts``."""
     out = np.zeros(len(counts) + 1, np.int64)
@@ -73,6 +81,7 @@ class GridTessellator:
         dev = cl_device()
         # on a CPU device the function code gets inline sin/cos, as the point renderer's does
         self.run = sample_run(dev.is_gpu)   # grid_vertices visits down a grid row or column
+        self.levels_local = LOCAL_SIZE if dev.is_gpu else CPU_LEVELS_LOCAL
         defines = {"PL_RUN": self.run}
         if not dev.is_gpu:
             defines[POLY_TRIG] = 1
@@ -94,32 +103,42 @@ class GridTessellator:
         n = len(records)
         if not n:
             return Grid(np.zeros(0, GRID_VERTEX.dtype), np.zeros(0, np.uint32), np.zeros((0, len(LEVELS)), np.int32), 0)
-        patches = cla.to_device(q, np.ascontiguousarray(records, RENDER_DTYPE))
+        # inputs copied as their buffers are made, the outputs read with one wait: on PoCL each
+        # blocking transfer waits for its threads (the close-up torus of the peers bench, 141
+        # patches, 2-core AMD EPYC: 2.7-2.9 -> 1.8-2.1 ms, with CPU_LEVELS_LOCAL)
+        patches = _input(dev.context, np.ascontiguousarray(records, RENDER_DTYPE))
         if levels is None:
-            levels = cla.empty(q, len(LEVELS) * n, np.int32)
+            levels = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, len(LEVELS) * 4 * n)
             rule, kind = level_rule(settings, threshold)
-            self._levels.set_args(patches.data, np.uint32(n), *d["inst"], d["cam"], cltypes.make_float4(*rule),
+            self._levels.set_args(patches, np.uint32(n), *d["inst"], d["cam"], cltypes.make_float4(*rule),
                                   cltypes.make_float2(float(settings.l_min), float(settings.l_max)),
-                                  np.uint32(kind), np.uint32(settings.inner_levels_for(False) == "segment"), levels.data)
-            launch(q, self._levels, (-(-n // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
-            lv = levels.get().reshape(n, len(LEVELS))
+                                  np.uint32(kind), np.uint32(settings.inner_levels_for(False) == "segment"), levels)
+            launch(q, self._levels, (-(-n // self.levels_local) * self.levels_local,), (self.levels_local,))
+            lv = np.empty((n, len(LEVELS)), np.int32)
+            cl.enqueue_copy(q, lv, levels)
         else:
             lv = np.ascontiguousarray(levels, np.int32).reshape(n, len(LEVELS))
-            levels = cla.to_device(q, lv.reshape(-1))
+            levels = _input(dev.context, lv)
         n_vertices, n_triangles = int(lv[:, VERTICES].sum()), int(lv[:, TRIANGLES].sum())
         if n_vertices > MAX_VERTICES:
             raise SceneError(f"the grid tessellator would make {n_vertices:,} vertices, more than "
                              f"its limit of {MAX_VERTICES:,} (paramlod.renderers.tess_grid.MAX_VERTICES); raise "
                              "the LOD threshold, lower tess l_max, or use tessellator 'hardware'")
-        vert_start = cla.to_device(q, starts(lv[:, VERTICES]))
-        tri_start = cla.to_device(q, starts(lv[:, TRIANGLES]))
-        vertices = cla.empty(q, n_vertices, GRID_VERTEX.dtype)
-        indices = cla.empty(q, 3 * n_triangles, np.uint32)
-        nan = cla.zeros(q, 1, np.uint32)
-        self._vertices.set_args(patches.data, np.uint32(n), levels.data, vert_start.data, *d["inst"],
-                                np.float32(settings.overlap), np.float32(overlap_px), vertices.data, nan.data)
+        vert_start = _input(dev.context, starts(lv[:, VERTICES]))
+        tri_start = _input(dev.context, starts(lv[:, TRIANGLES]))
+        vertices = np.empty(n_vertices, GRID_VERTEX.dtype)
+        indices = np.empty(3 * n_triangles, np.uint32)
+        nan = np.zeros(1, np.uint32)
+        vertices_d = cl.Buffer(dev.context, cl.mem_flags.WRITE_ONLY, max(vertices.nbytes, 4))
+        indices_d = cl.Buffer(dev.context, cl.mem_flags.WRITE_ONLY, max(indices.nbytes, 4))
+        nan_d = _input(dev.context, nan, cl.mem_flags.READ_WRITE)
+        self._vertices.set_args(patches, np.uint32(n), levels, vert_start, *d["inst"],
+                                np.float32(settings.overlap), np.float32(overlap_px), vertices_d, nan_d)
         items = -(-n_vertices // self.run)
         launch(q, self._vertices, (-(-items // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
-        self._indices.set_args(np.uint32(n), levels.data, vert_start.data, tri_start.data, indices.data)
+        self._indices.set_args(np.uint32(n), levels, vert_start, tri_start, indices_d)
         launch(q, self._indices, (-(-n // LOCAL_SIZE) * LOCAL_SIZE,), (LOCAL_SIZE,))
-        return Grid(vertices.get(), indices.get(), lv, int(nan.get()[0]))
+        cl.enqueue_copy(q, vertices, vertices_d, is_blocking=False)
+        cl.enqueue_copy(q, indices, indices_d, is_blocking=False)
+        cl.enqueue_copy(q, nan, nan_d)   # in order: the one wait, for all three
+        return Grid(vertices, indices, lv, int(nan[0]))

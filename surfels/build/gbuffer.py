@@ -52,7 +52,10 @@ class GBuffer:
         if n == 0:
             raise SurfelError(f"{self.source or 'the object'} covers no pixel in any of the "
                               f"{self.views.count} views: nothing to sample")
-        bad = self.valid & ~np.all(np.isfinite(self.position[..., :3]), axis=-1)
+        finite = np.isfinite(self.position[..., :3])
+        if finite.all():   # the usual case, without numpy's slow reduction over an axis of 3
+            return n
+        bad = self.valid & ~np.all(finite, axis=-1)
         if bad.any():
             raise SurfelError(f"{self.source or 'the object'}: {int(bad.sum())} G-buffer pixels have "
                               "non-finite positions")

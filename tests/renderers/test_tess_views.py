@@ -20,7 +20,7 @@ from paramlod.errors import SceneError
 from paramlod.function.registry import get_function
 from paramlod.lod.stage import LodSettings, LodStage
 from paramlod.lod.uploads import SceneBuffers
-from paramlod.meshlod.draw import VIEW_RECORD, _program as mesh_program
+from paramlod.meshlod.draw import VIEW_RECORD, draw_program as mesh_program
 from paramlod.renderers.shading import LIGHT
 from paramlod.renderers.tess import VIEW_FLOATS, TessRenderer, TessSettings, build_programs, view_chunks
 

@@ -9,7 +9,7 @@ trimesh = pytest.importorskip("trimesh")
 
 from paramlod.errors import ParamlodError  # noqa: E402
 from paramlod.surfels import SurfelError, SurfelSet  # noqa: E402
-from paramlod.surfels.build import load_mesh, sample_mesh  # noqa: E402
+from paramlod.surfels.build import load_mesh, mesh_gbuffer, sample_mesh, soup_from_trimesh  # noqa: E402
 from paramlod.app.surfels_cmd import main  # noqa: E402
 
 PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
@@ -68,6 +68,20 @@ def test_a_mesh_too_large_to_square_in_float32_names_its_file(tmp_path):
     with pytest.raises(SurfelError, match=r"mesh 'far.obj' spans 1.41e\+20, beyond 1.84e\+19"):
         sample_mesh(far, 10, views=4, resolution=32)
     assert np.isfinite(sample_mesh(near, 10, views=4, resolution=32).radii).all()
+
+
+def test_a_gbuffer_with_non_finite_positions_is_refused_where_covered():
+    # GBuffer.check: a NaN position at a covered pixel is named; at an uncovered one it is ignored
+    g = mesh_gbuffer(soup_from_trimesh(trimesh.creation.icosphere(subdivisions=2)), views=2, resolution=16)
+    covered = int(g.valid.sum())
+    assert g.check() == covered
+    empty = np.flatnonzero(~g.valid.reshape(-1))[0]
+    g.position.reshape(-1, 4)[empty, 0] = np.nan
+    assert g.check() == covered
+    hit = np.flatnonzero(g.valid.reshape(-1))[:2]
+    g.position.reshape(-1, 4)[hit, 2] = np.inf
+    with pytest.raises(SurfelError, match="2 G-buffer pixels have non-finite positions"):
+        g.check()
 
 
 def test_truncated_or_corrupt_surfels_files(tmp_path, small_set):
