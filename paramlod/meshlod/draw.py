@@ -50,7 +50,8 @@ from paramlod.device.context import gl_cache, gl_context
 from paramlod.device.programs import GLSL_LINE, check_block, context_lines, set_uniform
 from paramlod.errors import DeviceError, MeshError
 from paramlod.meshlod.buffers import MeshArrays, MeshInstances
-from paramlod.renderers.gl_targets import GLTargets, GrowBuffer, LayeredGLTargets, effective_aa, gl_matrix, targets_for
+from paramlod.renderers.gl_targets import (GLTargets, GrowBuffer, LayeredGLTargets, effective_aa, gl_matrix,
+                                           srgb8_defines, targets_for)
 from paramlod.renderers.shading import LIGHT
 
 COLOR_BY = {0: "material", 1: "cluster", 2: "level"}
@@ -79,7 +80,8 @@ def draw_program(ctx, color_by: int, views_per_draw: int = 0):
         debug = [kernels.source("common/dialect.glsl"), kernels.source("common/debug_color.cl")] if color_by else []
         vertex = "meshlod/mesh_views_vertex.glsl" if views_per_draw else "meshlod/mesh_vertex.glsl"
         stages = {"vertex_shader": head + "\n".join([*common, kernels.source(vertex)]),
-                  "fragment_shader": head + "\n".join([*common, *debug, kernels.source("meshlod/mesh_fragment.glsl")])}
+                  "fragment_shader": head + srgb8_defines(ctx) + "\n".join([*common, *debug,
+                                                                             kernels.source("meshlod/mesh_fragment.glsl")])}
         if views_per_draw:
             stages["geometry_shader"] = head + "\n".join([*common, kernels.source("meshlod/mesh_views_geometry.glsl")])
         try:

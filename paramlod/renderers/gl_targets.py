@@ -46,7 +46,7 @@ import moderngl
 import numpy as np
 
 from paramlod import kernels
-from paramlod.core.color import linear_to_srgb8, linear_to_srgb8_buckets
+from paramlod.core.color import SRGB8_BUCKETS, linear_to_srgb8, linear_to_srgb8_buckets
 from paramlod.core.frame import Frame
 from paramlod.core.layouts import glsl_prelude
 from paramlod.device.context import gl_cache
@@ -84,13 +84,14 @@ def effective_aa(ctx, mode) -> tuple[AAMode, AAMode, list[str]]:
     return req, eff, notes
 
 
-def _full_screen_program(ctx, defs: dict, common: list[str], fragment: str, what: str):
+def _full_screen_program(ctx, defs: dict, common: list[str], fragment: str, what: str, encodes: bool = False):
     """A program of the full-screen triangle (tess_resolve_vertex.glsl) and ``fragment``, each
-    stage "#version", the ``defs``, ``common`` and its file; a DeviceError naming ``what`` if it
-    does not compile."""
+    stage "#version", the ``defs``, ``common`` and its file (``encodes``: the fragment stage
+    encodes the image, with ``srgb8_defines``); a DeviceError naming ``what`` if it does not compile."""
     head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in defs.items())
-    stages = {name: head + "\n".join([*common, kernels.source(f"tess/{part}.glsl")])
-              for name, part in (("vertex_shader", "tess_resolve_vertex"), ("fragment_shader", fragment))}
+    encoder = srgb8_defines(ctx) if encodes else ""
+    stages = {"vertex_shader": head + "\n".join([*common, kernels.source("tess/tess_resolve_vertex.glsl")]),
+              "fragment_shader": head + encoder + "\n".join([*common, kernels.source(f"tess/{fragment}.glsl")])}
     try:
         return ctx.program(**stages)
     except moderngl.Error as exc:
@@ -129,7 +130,8 @@ def resolve_program(ctx, ss: int, samples: int, layered: bool = False, half: boo
             defs["PL_LAYERED"] = 1
         if half:
             defs["PL_HALF_NORMALS"] = 1
-        prog = programs[key] = _full_screen_program(ctx, defs, _pass_common(), "tess_resolve_fragment", "resolve")
+        prog = programs[key] = _full_screen_program(ctx, defs, _pass_common(), "tess_resolve_fragment", "resolve",
+                                                    encodes=True)
     return prog
 
 
@@ -153,14 +155,45 @@ def background_program(ctx):
     return prog
 
 
+def is_llvmpipe(ctx) -> bool:
+    """Whether ``ctx`` is Mesa's llvmpipe (OpenGL on the CPU)."""
+    return "llvmpipe" in str(ctx.info.get("GL_RENDERER", "")).lower()
+
+
+def srgb8_table() -> np.ndarray:
+    """uint32 (SRGB8_BUCKETS, 2): per bucket the code of its start and the bits of its threshold
+    (paramlod.core.color.linear_to_srgb8_buckets, whose codes and float32 thresholds these are exactly)."""
+    buckets = linear_to_srgb8_buckets()
+    return np.stack([buckets[:, 0].astype(np.uint32), buckets[:, 1].view(np.uint32)], axis=1)
+
+
+def srgb8_uniform(ctx) -> bool:
+    """Whether fragment stages read the image's encoding table as a uniform block (Mesa's llvmpipe,
+    where it fits) rather than a storage buffer. llvmpipe reads a storage buffer at a varying index
+    one lane at a time: the framed torus of the peers bench drew in 10.5-14.5 ms instead of
+    13.5-17.2 (2-core AMD EPYC, the draw alone, alternating twice). GPUs keep the storage buffer,
+    their path when measured; a uniform block read at varying indices is not measured there."""
+    return is_llvmpipe(ctx) and int(ctx.info.get("GL_MAX_UNIFORM_BLOCK_SIZE", 0) or 0) >= SRGB8_BUCKETS * 8
+
+
+def srgb8_defines(ctx) -> str:
+    """The #defines a fragment stage that encodes the image (common/targets.glsl ``srgb8_code``)
+    puts before its files: the table's bucket count, and PL_SRGB8_UNIFORM (``srgb8_uniform``)."""
+    return (f"#define PL_SRGB8_BUCKETS {SRGB8_BUCKETS}\n"
+            + ("#define PL_SRGB8_UNIFORM 1\n" if srgb8_uniform(ctx) else ""))
+
+
 def bind_srgb8_buckets(ctx):
-    """Bind the image's sRGB encoding table (paramlod.core.color.linear_to_srgb8_buckets; cached,
-    a storage buffer) to its binding, SRGB8_TABLE_BINDING (common/targets.glsl)."""
+    """Bind the image's sRGB encoding table (``srgb8_table``; cached) to its binding,
+    SRGB8_TABLE_BINDING (common/targets.glsl), as the fragment stages read it (``srgb8_uniform``)."""
     cache = gl_cache(ctx)
     buf = cache.get("srgb8_buckets")
     if buf is None:
-        buf = cache["srgb8_buckets"] = ctx.buffer(linear_to_srgb8_buckets().tobytes())
-    buf.bind_to_storage_buffer(SRGB8_TABLE_BINDING)
+        buf = cache["srgb8_buckets"] = ctx.buffer(srgb8_table().tobytes())
+    if srgb8_uniform(ctx):
+        buf.bind_to_uniform_block(SRGB8_TABLE_BINDING)
+    else:
+        buf.bind_to_storage_buffer(SRGB8_TABLE_BINDING)
 
 
 def carry_vao(ctx, ratio: int, coarse_samples: int):

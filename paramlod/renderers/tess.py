@@ -69,7 +69,8 @@ from paramlod.lod.uploads import SceneBuffers
 from paramlod.renderers.aa import AAMode, lod_divisor, parse_aa  # noqa: F401  (AAMode, lod_divisor re-exported)
 from paramlod.renderers.aa import hybrid_tiers, tier_divisors
 from paramlod.renderers.gl_targets import (GL_MAX_GEOMETRY_SHADER_INVOCATIONS, GLTargets, GrowBuffer, LayeredGLTargets,
-                                           effective_aa, gl_limit, gl_matrix, max_samples, targets_for)
+                                           effective_aa, gl_limit, gl_matrix, is_llvmpipe, max_samples,
+                                           srgb8_defines, targets_for)
 from paramlod.renderers.registry import RendererSpec, register_renderer
 from paramlod.renderers.shading import LIGHT
 from paramlod.renderers.tess_grid import GridTessellator
@@ -252,9 +253,10 @@ class TessSettings:
 
 
 # --- shader programs ----------------------------------------------------------------------------
-def _stage(defines: dict, body: list[str]) -> str:
-    """A GLSL stage: ``#version``, the ``defines``, the records' prelude, tess_common.glsl, ``body``."""
-    head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
+def _stage(defines: dict, body: list[str], encoder: str = "") -> str:
+    """A GLSL stage: ``#version``, the ``defines``, ``encoder`` (a fragment stage's
+    ``srgb8_defines``), the records' prelude, tess_common.glsl, ``body``."""
+    head = "#version 450 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + encoder
     return head + "\n".join([glsl_prelude(), kernels.source("tess/tess_common.glsl"), *body])
 
 
@@ -284,7 +286,8 @@ def build_programs(ctx, functions, spacing: str, invocations: int = 0, grid: boo
         key = "grid"
         if key not in programs:
             programs[key] = _program(ctx, {"vertex_shader": _stage({}, [kernels.source("tess/grid_vertex.glsl")]),
-                                           "fragment_shader": _stage({}, [kernels.source("tess/tess_fragment.glsl")])},
+                                           "fragment_shader": _stage({}, [kernels.source("tess/tess_fragment.glsl")],
+                                                                     srgb8_defines(ctx))},
                                      functions)
         return programs[key]
     key = (tuple(functions), spacing) if not invocations else (tuple(functions), spacing, invocations)
@@ -301,7 +304,8 @@ def build_programs(ctx, functions, spacing: str, invocations: int = 0, grid: boo
             "vertex_shader": _stage(tess_defs, [kernels.source("tess/tess_vertex.glsl")]),
             "tess_control_shader": _stage(tess_defs, [*views, gen_pos, kernels.source("tess/tess_control.glsl")]),
             "tess_evaluation_shader": _stage(tess_defs, [gen_surf, kernels.source("tess/tess_eval.glsl")]),
-            "fragment_shader": _stage(tess_defs, [*views, kernels.source("tess/tess_fragment.glsl")]),
+            "fragment_shader": _stage(tess_defs, [*views, kernels.source("tess/tess_fragment.glsl")],
+                                      srgb8_defines(ctx)),
         }
         if invocations:
             stages["geometry_shader"] = _stage(tess_defs, [*views, kernels.source("tess/tess_geometry.glsl")])
@@ -380,7 +384,7 @@ class TessRenderer:
 
     @cached_property
     def llvmpipe(self) -> bool:
-        return "llvmpipe" in str(self.ctx.info.get("GL_RENDERER", "")).lower()
+        return is_llvmpipe(self.ctx)
 
     def tessellator(self, settings: TessSettings) -> str:
         """The tessellator a draw with ``settings`` uses: "hardware" or "grid"."""

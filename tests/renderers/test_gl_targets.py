@@ -3,10 +3,12 @@
 follow, and the output sets are reused once Frames are dropped."""
 import gc
 
+import moderngl
 import numpy as np
 import pytest
 
 import paramlod as pl
+from paramlod import kernels
 from paramlod.core.color import SRGB8_BUCKETS, linear_to_srgb8, linear_to_srgb8_buckets, linear_to_srgb8_thresholds
 from paramlod.device.context import gl_context
 from paramlod.renderers import gl_targets
@@ -58,6 +60,43 @@ def test_the_buckets_give_the_host_encoder_on_every_float_in_0_1():
         x = np.arange(start, min(start + step, one + 1), dtype=np.uint32).view(np.float32)
         bad = np.flatnonzero(_bucket_codes(x) != linear_to_srgb8(x))
         assert not len(bad), f"{len(bad)} values encode differently, e.g. {x[bad[:3]]}"
+
+
+@pytest.mark.parametrize("uniform", [True, False])
+def test_the_fragment_encoder_gives_the_host_encoder_bit_for_bit(uniform):
+    """common/targets.glsl srgb8_code with its table read as a uniform block (llvmpipe's path) and
+    as a storage buffer (the GPUs'): every float32 within 64 ULPs of each threshold, random values
+    and out-of-range ones encode as linear_to_srgb8 does."""
+    ctx = gl_context()
+    thr = linear_to_srgb8_thresholds().view(np.uint32).astype(np.int64)
+    near = ((thr[:, None] + np.arange(-64, 65)[None, :]).ravel()).astype(np.uint32).view(np.float32)
+    x = np.concatenate([near, np.random.default_rng(3).random(20_000, np.float32),
+                        np.float32([0.0, -0.0, 1.0, -1.0, 2.0, 1e-30, 0.0031308, np.inf, -np.inf])])
+    w = 256
+    h = -(-len(x) // w)
+    values = np.zeros(w * h, np.float32)
+    values[:len(x)] = x
+    source = ctx.texture((w, h), 1, values.tobytes(), dtype="f4")
+    source.filter = (ctx.NEAREST, ctx.NEAREST)
+    defines = f"#define PL_SRGB8_BUCKETS {SRGB8_BUCKETS}\n" + ("#define PL_SRGB8_UNIFORM 1\n" if uniform else "")
+    prog = ctx.program(
+        vertex_shader="#version 450 core\n" + kernels.source("tess/tess_resolve_vertex.glsl"),
+        fragment_shader="#version 450 core\n" + defines + kernels.source("common/targets.glsl") + """
+uniform sampler2D u_x;
+void main() { out_image = srgb8_image(vec3(texelFetch(u_x, ivec2(gl_FragCoord.xy), 0).r)); }""")
+    table = ctx.buffer(gl_targets.srgb8_table().tobytes())
+    (table.bind_to_uniform_block if uniform else table.bind_to_storage_buffer)(gl_targets.SRGB8_TABLE_BINDING)
+    out = gl_targets._OutputSet(ctx, (w, h))
+    out.fbo.use()
+    ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+    source.use(location=0)
+    prog["u_x"] = 0
+    ctx.vertex_array(prog, []).render(mode=moderngl.TRIANGLES, vertices=3)
+    codes = out.read("image")[::-1].reshape(-1, 3)[:len(x), 0]   # rows back in upload order
+    np.testing.assert_array_equal(codes, linear_to_srgb8(x))
+    for obj in (out, source, table, prog):
+        obj.release()
+    gl_targets.bind_srgb8_buckets(ctx)   # the renderers' binding again
 
 
 @pytest.mark.parametrize("aa", ["noAA", "4xSS"])
