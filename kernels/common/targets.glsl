@@ -12,10 +12,11 @@ layout(location = 4) out uvec4 out_image;
 // The image's code of a linear value, bit for bit the host's linear_to_srgb8: from the encoder's
 // table (paramlod.core.color.linear_to_srgb8_buckets: per bucket of [0, 1] the code of the
 // bucket's start and the one threshold inside it, here as uint pairs, the threshold's float bits),
-// not the shader's pow, whose rounding differs from numpy's. Only in stages the host gives PL_SRGB8_BUCKETS (gl_targets.srgb8_defines).
-// The table is one buffer, read as a storage buffer or, with PL_SRGB8_UNIFORM (Mesa's llvmpipe),
-// as a uniform block of the same bytes: llvmpipe reads a storage buffer at a varying index one
-// lane at a time, which cost a third of a tess draw (a texel fetch cost more).
+// not the shader's pow, whose rounding differs from numpy's. Only in the stages that the host
+// gives PL_SRGB8_BUCKETS (paramlod/renderers/gl_targets.py srgb8_defines). The table is one
+// buffer, read as a storage buffer or, with PL_SRGB8_UNIFORM (Mesa's llvmpipe), as a uniform
+// block of the same bytes: llvmpipe reads a storage buffer at a varying index one lane at a time,
+// which cost a third of a tess draw (a texel fetch cost more).
 #ifdef PL_SRGB8_BUCKETS
 #ifdef PL_SRGB8_UNIFORM
 layout(std140, binding = 5) uniform PlSrgb8Table { uvec4 pl_srgb8_pairs[PL_SRGB8_BUCKETS / 2]; };

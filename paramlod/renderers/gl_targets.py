@@ -170,9 +170,9 @@ def srgb8_table() -> np.ndarray:
 def srgb8_uniform(ctx) -> bool:
     """Whether fragment stages read the image's encoding table as a uniform block (Mesa's llvmpipe,
     where it fits) rather than a storage buffer. llvmpipe reads a storage buffer at a varying index
-    one lane at a time: the framed torus of the peers bench drew in 10.5-14.5 ms instead of
-    13.5-17.2 (2-core AMD EPYC, the draw alone, alternating twice). GPUs keep the storage buffer,
-    their path when measured; a uniform block read at varying indices is not measured there."""
+    one lane at a time: the framed torus of the peers bench drew in 12.0-16.4 ms instead of
+    14.5-20.2 (2-core AMD EPYC, the draw alone, alternating three times). GPUs keep the storage
+    buffer, their path when measured; a uniform block read at varying indices is not measured there."""
     return is_llvmpipe(ctx) and int(ctx.info.get("GL_MAX_UNIFORM_BLOCK_SIZE", 0) or 0) >= SRGB8_BUCKETS * 8
 
 
@@ -210,7 +210,7 @@ def carry_vao(ctx, ratio: int, coarse_samples: int):
 
 # what a set drawn into directly reads where nothing was drawn (its object id is 0)
 BLANK = {"color": 0.0, "depth": np.inf, "normal": 0.0}
-SRGB8_TABLE_BINDING = 5   # the storage buffer binding of the image's encoding table (common/targets.glsl)
+SRGB8_TABLE_BINDING = 5   # the image encoding table's binding, storage buffer or uniform block (common/targets.glsl)
 LENT_SETS = 3   # output sets that lent Frames may hold at once before the oldest is copied to the host
 # the resolve's counter buffer (tess_common.glsl PlCounters): NaN vertices, device samples
 RESOLVE_COUNTERS_BYTES = 8
