@@ -36,6 +36,14 @@ class CLDevice:
 
         return bool(self.device.type & cl.device_type.GPU)
 
+    def copy_of(self, a, writable: bool = False):
+        """A device buffer holding a copy of the host array ``a``, made with it: no transfer is
+        queued, so nothing waits for one (on PoCL each blocking transfer waits for its threads)."""
+        import pyopencl as cl
+
+        flags = cl.mem_flags.READ_WRITE if writable else cl.mem_flags.READ_ONLY
+        return cl.Buffer(self.context, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=a)
+
 
 _cl: CLDevice | None = None
 _cl_override: str | None = None

@@ -62,11 +62,6 @@ def level_rule(settings, threshold) -> tuple[tuple, int]:
     return (L, L, float(threshold[0]), float(threshold[1])), 1
 
 
-def _input(ctx, a: np.ndarray, flags=cl.mem_flags.READ_ONLY) -> cl.Buffer:
-    """A device buffer holding a copy of the host array ``a`` (made with it: no queued transfer)."""
-    return cl.Buffer(ctx, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=a)
-
-
 def starts(counts: np.ndarray) -> np.ndarray:
     """uint32 first index of each patch's run and the total, of per-patch ``counts``."""
     out = np.zeros(len(counts) + 1, np.int64)
@@ -106,7 +101,7 @@ class GridTessellator:
         # inputs copied as their buffers are made, the outputs read with one wait: on PoCL each
         # blocking transfer waits for its threads (the close-up torus of the peers bench, 141
         # patches, 2-core AMD EPYC: 2.7-2.9 -> 1.8-2.1 ms, with CPU_LEVELS_LOCAL)
-        patches = _input(dev.context, np.ascontiguousarray(records, RENDER_DTYPE))
+        patches = dev.copy_of(np.ascontiguousarray(records, RENDER_DTYPE))
         if levels is None:
             levels = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, len(LEVELS) * 4 * n)
             rule, kind = level_rule(settings, threshold)
@@ -118,20 +113,20 @@ class GridTessellator:
             cl.enqueue_copy(q, lv, levels)
         else:
             lv = np.ascontiguousarray(levels, np.int32).reshape(n, len(LEVELS))
-            levels = _input(dev.context, lv)
+            levels = dev.copy_of(lv)
         n_vertices, n_triangles = int(lv[:, VERTICES].sum()), int(lv[:, TRIANGLES].sum())
         if n_vertices > MAX_VERTICES:
             raise SceneError(f"the grid tessellator would make {n_vertices:,} vertices, more than "
                              f"its limit of {MAX_VERTICES:,} (paramlod.renderers.tess_grid.MAX_VERTICES); raise "
                              "the LOD threshold, lower tess l_max, or use tessellator 'hardware'")
-        vert_start = _input(dev.context, starts(lv[:, VERTICES]))
-        tri_start = _input(dev.context, starts(lv[:, TRIANGLES]))
+        vert_start = dev.copy_of(starts(lv[:, VERTICES]))
+        tri_start = dev.copy_of(starts(lv[:, TRIANGLES]))
         vertices = np.empty(n_vertices, GRID_VERTEX.dtype)
         indices = np.empty(3 * n_triangles, np.uint32)
         nan = np.zeros(1, np.uint32)
         vertices_d = cl.Buffer(dev.context, cl.mem_flags.WRITE_ONLY, max(vertices.nbytes, 4))
         indices_d = cl.Buffer(dev.context, cl.mem_flags.WRITE_ONLY, max(indices.nbytes, 4))
-        nan_d = _input(dev.context, nan, cl.mem_flags.READ_WRITE)
+        nan_d = dev.copy_of(nan, writable=True)
         self._vertices.set_args(patches, np.uint32(n), levels, vert_start, *d["inst"],
                                 np.float32(settings.overlap), np.float32(overlap_px), vertices_d, nan_d)
         items = -(-n_vertices // self.run)

@@ -48,8 +48,7 @@ class _Raster:
         self.corners = self.upload(soup.positions)
 
     def upload(self, a: np.ndarray) -> cl.Buffer:
-        return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                         hostbuf=np.ascontiguousarray(a, np.float32))
+        return cl_device().copy_of(np.ascontiguousarray(a, np.float32))
 
     def keys(self, views: ViewSet) -> tuple[cl.Buffer, cl.Buffer]:
         """(the keys of ``views``, their matrices on the device)."""

@@ -135,11 +135,10 @@ class Sampler:
         prog = build(["surfels/surfels_sample.cl"])
         self.k = {name: cl.Kernel(prog, name) for name in
                   ("voronoi_splat", "farthest", "max_key", "conflict_splat", "survive")}
-        mf = cl.mem_flags
-        self.pos = cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.pos_host)
-        self.layers = cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=vs.layer_record())
+        self.pos = dev.copy_of(self.pos_host)
+        self.layers = dev.copy_of(vs.layer_record())
         lo, hi = tile_bounds(gbuf.position)
-        self.tiles_dev = tuple(cl.Buffer(dev.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in (lo, hi))
+        self.tiles_dev = (dev.copy_of(lo), dev.copy_of(hi))
         self.tile_grid = (lo.shape[2], lo.shape[1])
         self.vor = cla.empty(q, self.n_pix, np.uint64)
         self.conf = None if self.host_survivors else cla.empty(q, self.n_pix, np.uint64)   # device conflicts

@@ -86,15 +86,17 @@ uniform sampler2D u_x;
 void main() { out_image = srgb8_image(vec3(texelFetch(u_x, ivec2(gl_FragCoord.xy), 0).r)); }""")
     table = ctx.buffer(gl_targets.srgb8_table().tobytes())
     (table.bind_to_uniform_block if uniform else table.bind_to_storage_buffer)(gl_targets.SRGB8_TABLE_BINDING)
-    out = gl_targets._OutputSet(ctx, (w, h))
-    out.fbo.use()
+    # the targets' five attachments (common/targets.glsl); the image is the fifth
+    attachments = [ctx.texture((w, h), c, dtype=d) for c, d in ((4, "f4"), (1, "f4"), (4, "f4"), (1, "u4"), (4, "u1"))]
+    fbo = ctx.framebuffer(attachments)
+    fbo.use()
     ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
     source.use(location=0)
     prog["u_x"] = 0
     ctx.vertex_array(prog, []).render(mode=moderngl.TRIANGLES, vertices=3)
-    codes = out.read("image")[::-1].reshape(-1, 3)[:len(x), 0]   # rows back in upload order
-    np.testing.assert_array_equal(codes, linear_to_srgb8(x))
-    for obj in (out, source, table, prog):
+    image = np.frombuffer(fbo.read(components=4, attachment=4, dtype="u1"), np.uint8)   # rows in upload order
+    np.testing.assert_array_equal(image.reshape(-1, 4)[:len(x), 0], linear_to_srgb8(x))
+    for obj in (fbo, *attachments, source, table, prog):
         obj.release()
     gl_targets.bind_srgb8_buckets(ctx)   # the renderers' binding again
 
